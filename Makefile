@@ -1,0 +1,26 @@
+# The two commands of the README: `make reproduce` (main job) and `make test` (test suite).
+# Both set up what is missing first (libllvm19, .venv, the package), see scripts/setup.sh.
+VENV := .venv
+PY := $(VENV)/bin/python
+
+.PHONY: setup reproduce test lint bench clean
+
+.setup-stamp: pyproject.toml scripts/setup.sh
+	bash scripts/setup.sh
+	@touch .setup-stamp
+
+setup: .setup-stamp
+
+reproduce: setup
+	$(VENV)/bin/bench-sim reproduce
+
+test: setup
+	$(VENV)/bin/ruff check bench_sim tests benchmarks
+	$(PY) -m pytest
+
+bench: setup
+	$(PY) benchmarks/bench_render.py
+	$(PY) benchmarks/bench_sensor.py
+
+clean:
+	rm -rf $(VENV) .setup-stamp

@@ -1,0 +1,14 @@
+"""bench_sim: a physically-based optical test-bench simulator for HDR push-broom imaging with
+digital time-delay integration (DTDI).
+
+Data flow (one direction): ``config -> rig -> render -> sensor -> fusion -> metrics -> experiments``.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("bench_sim")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
+    __version__ = "0.0.0+source"
+
+__all__ = ["__version__"]

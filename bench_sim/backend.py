@@ -1,0 +1,368 @@
+"""Mitsuba / Dr.Jit variant choice: CUDA when a GPU works, else LLVM with a working libLLVM,
+else a scalar variant (with a warning).
+
+Dr.Jit 1.5's LLVM backend aborts the *whole process* (``LLVM ERROR: Cannot select: fminimum``)
+with Debian 12's libLLVM 15 and 16, while libLLVM 19 works. So no candidate library is ever
+tried in this process: each is probed in a child process that runs a small kernel using
+``dr.minimum`` (the operation that trips old LLVMs), and the verdict is cached on disk keyed by
+the library's path, size, mtime and the Dr.Jit version. ``DRJIT_LIBLLVM_PATH`` is set before
+Mitsuba is first imported.
+
+Nothing in this module imports mitsuba or drjit at module import time.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import re
+import subprocess
+import sys
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "BackendChoice",
+    "ProbeResult",
+    "llvm_candidates",
+    "probe_llvm",
+    "probe_cuda",
+    "choose_backend",
+    "init_mitsuba",
+    "variant_for",
+]
+
+ENV_LLVM = "DRJIT_LIBLLVM_PATH"
+#: Child-process probe: import drjit with the candidate library and run a kernel with
+#: dr.minimum/dr.maximum on floats (LLVM's fminimum intrinsic), then print a marker.
+_LLVM_PROBE = (
+    "import drjit as dr\n"
+    "from drjit.llvm import Float\n"
+    "assert dr.has_backend(dr.JitBackend.LLVM), 'no LLVM backend'\n"
+    "x = Float([1.0, -2.0, 3.5])\n"
+    "y = dr.minimum(x, Float(0.5)) + dr.maximum(x, Float(0.0)) * 2\n"
+    "dr.eval(y)\n"
+    "assert abs(sum(y.numpy().tolist()) - 8.0) < 1e-5, 'wrong kernel result'\n"
+    "print('BENCH_SIM_LLVM_OK')\n"
+)
+_CUDA_PROBE = (
+    "import drjit as dr\n"
+    "assert dr.has_backend(dr.JitBackend.CUDA), 'no CUDA backend'\n"
+    "from drjit.cuda import Float\n"
+    "y = dr.minimum(Float([1.0, -2.0]), Float(0.5))\n"
+    "dr.eval(y)\n"
+    "print('BENCH_SIM_CUDA_OK')\n"
+)
+
+
+@dataclass(frozen=True)
+class ProbeResult:
+    """Outcome of probing one backend in a child process."""
+
+    ok: bool
+    detail: str
+
+
+@dataclass
+class BackendChoice:
+    """The chosen Mitsuba variant and why."""
+
+    variant: str
+    kind: str  # "cuda", "llvm" or "scalar"
+    llvm_path: str | None
+    reason: str
+    probes: dict[str, str] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "variant": self.variant,
+            "kind": self.kind,
+            "llvm_path": self.llvm_path,
+            "reason": self.reason,
+            "probes": dict(self.probes),
+        }
+
+
+def _llvm_version_key(path: str) -> tuple[int, ...]:
+    m = re.search(r"libLLVM[-.]?(?:so\.)?(\d+)(?:\.(\d+))?", os.path.basename(path))
+    if not m:
+        return (0,)
+    return tuple(int(g) for g in m.groups() if g is not None)
+
+
+def llvm_candidates(extra: Sequence[str] = ()) -> list[str]:
+    """Candidate libLLVM shared libraries, newest first, de-duplicated by real path.
+
+    ``DRJIT_LIBLLVM_PATH`` (if set) and ``extra`` come first, in that order.
+    """
+    found: list[str] = []
+    env = os.environ.get(ENV_LLVM)
+    if env:
+        found.append(env)
+    found.extend(extra)
+    patterns = [
+        "/usr/lib/*-linux-gnu/libLLVM*.so*",
+        "/usr/lib/llvm-*/lib/libLLVM*.so*",
+        "/usr/lib64/libLLVM*.so*",
+        "/usr/local/lib/libLLVM*.so*",
+        "/opt/homebrew/opt/llvm/lib/libLLVM.dylib",
+    ]
+    globbed: list[str] = []
+    for pat in patterns:
+        globbed.extend(glob.glob(pat))
+    globbed.sort(key=_llvm_version_key, reverse=True)
+    found.extend(globbed)
+    seen: set[str] = set()
+    out: list[str] = []
+    for p in found:
+        real = os.path.realpath(p)
+        if real in seen or not os.path.exists(real):
+            continue
+        seen.add(real)
+        out.append(p)
+    return out
+
+
+def _drjit_version() -> str:
+    try:
+        return version("drjit")
+    except PackageNotFoundError:
+        return "missing"
+
+
+def _cache_file() -> Path:
+    root = os.environ.get("BENCH_SIM_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "bench_sim"
+    )
+    return Path(root) / "backend_probes.json"
+
+
+def _cache_key(kind: str, path: str | None) -> str:
+    if path is None:
+        return f"{kind}|drjit={_drjit_version()}"
+    try:
+        st = os.stat(os.path.realpath(path))
+        ident = f"{os.path.realpath(path)}|{st.st_size}|{int(st.st_mtime)}"
+    except OSError:
+        ident = path
+    return f"{kind}|{ident}|drjit={_drjit_version()}"
+
+
+def _load_cache() -> dict[str, Any]:
+    try:
+        return json.loads(_cache_file().read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _store_cache(key: str, result: ProbeResult) -> None:
+    path = _cache_file()
+    data = _load_cache()
+    data[key] = {"ok": result.ok, "detail": result.detail}
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
+        os.replace(tmp, path)
+    except OSError:  # a read-only home must not stop a run
+        pass
+
+
+Runner = Callable[..., subprocess.CompletedProcess]
+
+
+def _run_probe(
+    code: str, env_extra: dict[str, str], marker: str, runner: Runner, timeout_s: float
+) -> ProbeResult:
+    env = dict(os.environ)
+    env.update(env_extra)
+    try:
+        proc = runner(
+            [sys.executable, "-c", code],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=timeout_s,
+        )
+    except subprocess.TimeoutExpired:
+        return ProbeResult(False, f"probe timed out after {timeout_s:.0f} s")
+    except OSError as exc:
+        return ProbeResult(False, f"probe could not start: {exc}")
+    if proc.returncode == 0 and marker in (proc.stdout or ""):
+        return ProbeResult(True, "probe kernel ran")
+    text = ((proc.stderr or "") + (proc.stdout or "")).strip().splitlines()
+    last = next((ln for ln in reversed(text) if ln.strip()), "")
+    if "Cannot select" in (proc.stderr or ""):
+        last = next(ln for ln in text if "Cannot select" in ln)
+    how = f"exit status {proc.returncode}" if proc.returncode >= 0 else f"signal {-proc.returncode}"
+    return ProbeResult(False, f"probe failed ({how}): {last[:200]}")
+
+
+def probe_llvm(
+    path: str,
+    *,
+    runner: Runner = subprocess.run,
+    use_cache: bool = True,
+    timeout_s: float = 120.0,
+) -> ProbeResult:
+    """Probe whether Dr.Jit's LLVM backend works with the library at ``path``.
+
+    The probe runs in a child process, so a library that makes LLVM abort kills only the child.
+    Verdicts are cached on disk (``$BENCH_SIM_CACHE_DIR`` or ``~/.cache/bench_sim``).
+    """
+    key = _cache_key("llvm", path)
+    if use_cache:
+        hit = _load_cache().get(key)
+        if hit is not None:
+            return ProbeResult(bool(hit["ok"]), str(hit["detail"]) + " (cached)")
+    result = _run_probe(_LLVM_PROBE, {ENV_LLVM: path}, "BENCH_SIM_LLVM_OK", runner, timeout_s)
+    if use_cache:
+        _store_cache(key, result)
+    return result
+
+
+def probe_cuda(
+    *, runner: Runner = subprocess.run, use_cache: bool = True, timeout_s: float = 120.0
+) -> ProbeResult:
+    """Probe whether Dr.Jit's CUDA backend works (a GPU and driver are present), in a child."""
+    if not (glob.glob("/dev/nvidia*") or glob.glob("/usr/lib/*-linux-gnu/libcuda.so*")):
+        return ProbeResult(False, "no NVIDIA device or driver library found")
+    key = _cache_key("cuda", None)
+    if use_cache:
+        hit = _load_cache().get(key)
+        if hit is not None:
+            return ProbeResult(bool(hit["ok"]), str(hit["detail"]) + " (cached)")
+    result = _run_probe(_CUDA_PROBE, {}, "BENCH_SIM_CUDA_OK", runner, timeout_s)
+    if use_cache:
+        _store_cache(key, result)
+    return result
+
+
+def variant_for(kind: str, mode: str = "mono") -> str:
+    """Mitsuba variant name for a backend kind and colour mode.
+
+    The pip wheel has no ``scalar_mono``: the scalar fallback for mono is ``scalar_rgb`` (the
+    scene is gray, so the channels are equal and one of them is the mono value).
+    """
+    if kind == "scalar":
+        return "scalar_spectral" if mode == "spectral" else "scalar_rgb"
+    return f"{kind}_ad_{mode}"
+
+
+def choose_backend(
+    prefer: str = "auto",
+    mode: str = "mono",
+    *,
+    llvm_probe: Callable[[str], ProbeResult] = probe_llvm,
+    cuda_probe: Callable[[], ProbeResult] = probe_cuda,
+    candidates: Callable[[], list[str]] = llvm_candidates,
+) -> BackendChoice:
+    """Choose a variant: CUDA if it works, else LLVM with the first library that passes its
+    probe, else scalar (with a warning).
+
+    Parameters
+    ----------
+    prefer
+        ``"auto"``, a backend kind (``"cuda"``, ``"llvm"``, ``"scalar"``) or a full variant name.
+        Environment variable ``BENCH_SIM_VARIANT`` overrides ``"auto"``.
+    mode
+        ``"mono"`` (default), ``"rgb"`` or ``"spectral"``.
+    """
+    if prefer == "auto":
+        prefer = os.environ.get("BENCH_SIM_VARIANT", "auto")
+    probes: dict[str, str] = {}
+    explicit_variant = prefer if "_" in prefer else None
+    wanted = prefer.split("_", 1)[0] if explicit_variant else prefer
+    if wanted not in ("auto", "cuda", "llvm", "scalar"):
+        from bench_sim.errors import BenchSimError
+
+        raise BenchSimError(
+            f"render.variant = {prefer!r}: allowed 'auto', 'cuda', 'llvm', 'scalar' or a variant name"
+        )
+
+    def pick(kind: str) -> str:
+        return explicit_variant or variant_for(kind, mode)
+
+    if wanted in ("auto", "cuda"):
+        res = cuda_probe()
+        probes["cuda"] = res.detail
+        if res.ok:
+            return BackendChoice(pick("cuda"), "cuda", None, "CUDA backend works", probes)
+    if wanted in ("auto", "llvm", "cuda"):
+        for path in candidates():
+            res = llvm_probe(path)
+            probes[path] = ("ok: " if res.ok else "rejected: ") + res.detail
+            if res.ok:
+                return BackendChoice(
+                    pick("llvm") if wanted != "cuda" else variant_for("llvm", mode),
+                    "llvm",
+                    path,
+                    f"libLLVM at {path} passed the probe",
+                    probes,
+                )
+    reason = "no working CUDA device and no libLLVM passed the probe"
+    if wanted == "scalar":
+        reason = "scalar variant requested"
+    else:
+        warnings.warn(
+            f"bench_sim: {reason}; falling back to the slow scalar variant "
+            "(install Debian's libllvm19 for the LLVM backend)",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    return BackendChoice(
+        explicit_variant if wanted == "scalar" and explicit_variant else variant_for("scalar", mode),
+        "scalar",
+        None,
+        reason,
+        probes,
+    )
+
+
+_ACTIVE: BackendChoice | None = None
+
+
+def init_mitsuba(prefer: str = "auto", mode: str = "mono") -> tuple[Any, BackendChoice]:
+    """Choose the backend (once per process), set ``DRJIT_LIBLLVM_PATH``, import Mitsuba and set
+    its variant. Returns ``(mitsuba module, choice)``.
+
+    A later call with another mode switches the variant on the same backend kind.
+    """
+    global _ACTIVE
+    if _ACTIVE is None:
+        if "mitsuba" in sys.modules and os.environ.get(ENV_LLVM) is None:
+            warnings.warn(
+                "bench_sim: mitsuba was imported before the backend was chosen", RuntimeWarning,
+                stacklevel=2,
+            )
+        choice = choose_backend(prefer, mode)
+        if choice.llvm_path is not None:
+            os.environ[ENV_LLVM] = choice.llvm_path
+        _ACTIVE = choice
+    else:
+        choice = _ACTIVE
+        wanted = variant_for(choice.kind, mode) if "_" not in prefer else prefer
+        if wanted != choice.variant:
+            choice = BackendChoice(wanted, choice.kind, choice.llvm_path, choice.reason, choice.probes)
+            _ACTIVE = choice
+    import mitsuba as mi
+
+    if mi.variant() != choice.variant:
+        mi.set_variant(choice.variant)
+    return mi, choice
+
+
+def versions() -> dict[str, str]:
+    """Versions of bench_sim and its core libraries."""
+    out = {"python": sys.version.split()[0]}
+    for pkg in ("bench_sim", "mitsuba", "drjit", "numpy", "OpenEXR", "trimesh", "pydantic"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "missing"
+    return out

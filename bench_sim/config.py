@@ -1,0 +1,419 @@
+"""Configuration: pydantic models for every section of a bench, loaded from TOML.
+
+Units are SI and carried in the field names (``_m``, ``_s``, ``_w_m2``, ``_e``, ``_dn``).
+The defaults are the paper rig (``scenes/paper_rig.toml`` restates them explicitly).
+Unknown keys are rejected. A TOML file may name a ``base`` file (relative to itself) whose
+values it overrides, which is how the lighting presets in ``scenes/`` are built.
+
+Errors are raised as :class:`ConfigError` with one line naming the file, the key, the value and
+what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from bench_sim.errors import BenchSimError
+
+__all__ = [
+    "ConfigError",
+    "DrumConfig",
+    "LensConfig",
+    "TargetConfig",
+    "SpotLightConfig",
+    "FillLightConfig",
+    "LightsConfig",
+    "SensorConfig",
+    "TimingConfig",
+    "DTDIConfig",
+    "RenderConfig",
+    "FusionConfig",
+    "BenchConfig",
+    "DEFAULT_CONFIG_PATH",
+    "load_config",
+    "config_from_dict",
+    "config_to_toml_dict",
+    "config_sha256",
+]
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_CONFIG_PATH = REPO_ROOT / "scenes" / "paper_rig.toml"
+
+PositiveFloat = Annotated[float, Field(gt=0)]
+Fraction = Annotated[float, Field(ge=0, le=1)]
+
+
+class ConfigError(BenchSimError):
+    """A bad configuration: the message is one line naming file, key, value and what is allowed."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+class DrumConfig(_Section):
+    """The rotating drum (roller) that carries the printed target.
+
+    The axis is the world ``x`` axis (across the sensor columns); the camera looks along ``-z``
+    at the drum surface point ``(0, 0, radius_m)``.
+    """
+
+    radius_m: PositiveFloat = 0.10
+    length_m: PositiveFloat = 0.30
+    geometry: Literal["analytic", "mesh"] = Field(
+        "analytic",
+        description="'analytic': Mitsuba's cylinder (fastest); 'mesh': trimesh body with end "
+        "caps, axle and mount, handed to Mitsuba as a mesh",
+    )
+    mesh_segments: Annotated[int, Field(ge=16, le=65536)] = 2048
+    axle_radius_m: PositiveFloat = 0.012
+    axle_overhang_m: Annotated[float, Field(ge=0)] = 0.05
+    bench: bool = Field(True, description="add the bench plate under the drum (mesh geometry)")
+    bench_albedo: Fraction = 0.05
+    mount_albedo: Fraction = 0.05
+
+
+class LensConfig(_Section):
+    """Camera lens. ``thinlens`` (with aperture) or ``perspective`` (pinhole special case)."""
+
+    model: Literal["thinlens", "perspective"] = "thinlens"
+    focal_length_m: PositiveFloat = 0.050
+    f_number: Annotated[float, Field(ge=0.5, le=128)] = 4.0
+    working_distance_m: PositiveFloat = Field(
+        0.50, description="lens to the drum surface on the optical axis"
+    )
+    focus_distance_m: PositiveFloat | None = Field(
+        None, description="lens to the plane in focus; default: the working distance"
+    )
+    transmission: Annotated[float, Field(gt=0, le=1)] = 0.90
+    cos4_falloff: bool = True
+    diffraction_psf: bool = Field(False, description="convolve the focal plane with an Airy PSF")
+
+    @model_validator(mode="after")
+    def _focus_beyond_focal_length(self) -> LensConfig:
+        if self.working_distance_m <= self.focal_length_m:
+            raise ValueError(
+                f"working_distance_m = {self.working_distance_m} must exceed focal_length_m = "
+                f"{self.focal_length_m} for a real image"
+            )
+        if self.focus_distance_m is not None and self.focus_distance_m <= self.focal_length_m:
+            raise ValueError(
+                f"focus_distance_m = {self.focus_distance_m} must exceed focal_length_m = "
+                f"{self.focal_length_m}"
+            )
+        return self
+
+    @property
+    def focus_m(self) -> float:
+        """Object distance in focus [m]."""
+        return self.focus_distance_m if self.focus_distance_m is not None else self.working_distance_m
+
+    @property
+    def image_distance_m(self) -> float:
+        """Lens to sensor distance [m] (thin-lens equation for the focus distance)."""
+        f, s = self.focal_length_m, self.focus_m
+        return f * s / (s - f)
+
+    @property
+    def magnification(self) -> float:
+        """|m| = image distance / working distance (object on the optical axis)."""
+        return self.image_distance_m / self.working_distance_m
+
+
+class TargetConfig(_Section):
+    """The printed target: a reflectance pattern on the drum surface.
+
+    The panel is ``panel_lines`` object pixels long (along the track) and ``panel_columns`` wide;
+    it repeats around the drum circumference (rounded so an integer number of panels fits).
+    """
+
+    layout: Literal["paper", "uniform"] = "paper"
+    panel_lines: Annotated[int, Field(ge=16, le=65536)] = 1024
+    panel_columns: Annotated[int, Field(ge=16, le=65536)] = 1024
+    texels_per_pixel: Annotated[int, Field(ge=1, le=16)] = 4
+    reflectance_min: Annotated[float, Field(gt=0, lt=1)] = 0.02
+    reflectance_max: Annotated[float, Field(gt=0, le=1)] = 0.90
+    wedge_steps: Annotated[int, Field(ge=12, le=64)] = 16
+    background: Fraction = 0.30
+    uniform_reflectance: Fraction = 0.5
+
+    @model_validator(mode="after")
+    def _range(self) -> TargetConfig:
+        if self.reflectance_min >= self.reflectance_max:
+            raise ValueError(
+                f"reflectance_min = {self.reflectance_min} must be below reflectance_max = "
+                f"{self.reflectance_max}"
+            )
+        return self
+
+
+class SpotLightConfig(_Section):
+    """The strong light: a spot, aimed at a point of the drum surface.
+
+    ``irradiance_w_m2`` is the in-band irradiance on a plane normal to the beam at the aim point,
+    so the spot's intensity is ``irradiance_w_m2 * d**2`` [W/sr] with ``d`` the distance to it.
+    """
+
+    enabled: bool = True
+    irradiance_w_m2: Annotated[float, Field(ge=0)] = 100.0
+    position_m: tuple[float, float, float] = (-0.10, 0.25, 0.45)
+    aim_m: tuple[float, float, float] = (-0.012, 0.0, 0.10)
+    cutoff_deg: Annotated[float, Field(gt=0, le=90)] = 2.2
+    beam_width_deg: Annotated[float, Field(gt=0, le=90)] = 1.8
+
+    @model_validator(mode="after")
+    def _beam(self) -> SpotLightConfig:
+        if self.beam_width_deg > self.cutoff_deg:
+            raise ValueError(
+                f"beam_width_deg = {self.beam_width_deg} must not exceed cutoff_deg = "
+                f"{self.cutoff_deg}"
+            )
+        return self
+
+
+class FillLightConfig(_Section):
+    """The weak light: a uniform diffuse fill (constant environment).
+
+    ``irradiance_w_m2`` is the in-band irradiance on an unoccluded surface (``pi * L``).
+    """
+
+    enabled: bool = True
+    irradiance_w_m2: Annotated[float, Field(ge=0)] = 4.0
+
+
+class LightsConfig(_Section):
+    strong: SpotLightConfig = SpotLightConfig()
+    weak: FillLightConfig = FillLightConfig()
+
+
+class SensorConfig(_Section):
+    """Area CMOS sensor: geometry and EMVA 1288 (Release 4) pixel model.
+
+    Noise switches let every source be turned off for studies and tests.
+    """
+
+    rows: Annotated[int, Field(ge=1, le=4096)] = 100
+    columns: Annotated[int, Field(ge=1, le=16384)] = 1024
+    pixel_pitch_m: PositiveFloat = 5.5e-6
+    wavelength_m: Annotated[float, Field(gt=200e-9, lt=2000e-9)] = 550e-9
+    quantum_efficiency: Annotated[float, Field(gt=0, le=1)] = 0.55
+    full_well_e: PositiveFloat = 13500.0
+    read_noise_e: Annotated[float, Field(ge=0)] = 13.0
+    dark_current_e_s: Annotated[float, Field(ge=0)] = 125.0
+    dsnu_e_s: Annotated[float, Field(ge=0)] = Field(
+        12.5, description="dark signal non-uniformity, rms over pixels of the dark current [e-/s]"
+    )
+    prnu: Annotated[float, Field(ge=0, le=0.5)] = 0.01
+    column_offset_dn: Annotated[float, Field(ge=0)] = Field(
+        0.5, description="rms of the per-column offset of the CMOS column amplifiers [DN]"
+    )
+    conversion_gain_dn_per_e: PositiveFloat = Field(
+        0.072, description="K: digital numbers per electron"
+    )
+    black_offset_dn: Annotated[float, Field(ge=0)] = 20.0
+    adc_bits: Annotated[int, Field(ge=1, le=16)] = 10
+    shot_noise: bool = True
+    dark_noise: bool = True
+    read_noise: bool = True
+    prnu_enabled: bool = True
+    dsnu_enabled: bool = True
+    column_fpn: bool = True
+    quantization: bool = True
+
+
+class TimingConfig(_Section):
+    """Line period and integration time. The drum speed follows from them (see rig.geometry)."""
+
+    line_period_s: PositiveFloat = 100e-6
+    integration_time_s: PositiveFloat | None = Field(
+        None, description="per-frame exposure; default: the whole line period"
+    )
+    sync_error: Annotated[float, Field(gt=-0.5, lt=0.5)] = Field(
+        0.0, description="relative speed error of the drum: image moves (1 + e) pixels per line"
+    )
+
+    @model_validator(mode="after")
+    def _t_int(self) -> TimingConfig:
+        if self.integration_time_s is not None and self.integration_time_s > self.line_period_s:
+            raise ValueError(
+                f"integration_time_s = {self.integration_time_s} must not exceed line_period_s = "
+                f"{self.line_period_s}"
+            )
+        return self
+
+    @property
+    def t_int_s(self) -> float:
+        return self.integration_time_s if self.integration_time_s is not None else self.line_period_s
+
+
+class DTDIConfig(_Section):
+    """Digital TDI accumulation: output word of ``beta_bits`` (Phi_FS = 2**beta, eq. 4)."""
+
+    beta_bits: Annotated[int, Field(ge=1, le=32)] = 12
+    subtract_black: bool = True
+
+
+class RenderConfig(_Section):
+    """How exposures are rendered."""
+
+    engine: Literal["fast", "reference"] = "fast"
+    variant: str = Field("auto", description="'auto' or a Mitsuba variant name")
+    spectral: bool = Field(False, description="render spectrally and weight by the QE curve")
+    spp: Annotated[int, Field(ge=1, le=65536)] = 16
+    subpixels: Annotated[int, Field(ge=1, le=8)] = Field(
+        4, description="fast engine: sub-pixel records per pixel side"
+    )
+    max_depth: Annotated[int, Field(ge=2, le=64)] = Field(
+        2, description="path depth; 2 = direct light only (required by the fast engine)"
+    )
+    emitter_samples: Annotated[int, Field(ge=1, le=64)] = 1
+    bsdf_samples: Annotated[int, Field(ge=1, le=64)] = 1
+    weak_sampling_weight: Annotated[float, Field(gt=0, le=1)] = 1e-3
+
+
+class FusionConfig(_Section):
+    """Stages fused by the paper's rule (eq. 11) and the display transform."""
+
+    mu1: Annotated[int, Field(ge=1)] = 10
+    mu2: Annotated[int, Field(ge=1)] = 80
+    tra: Literal["log", "gamma", "histeq", "reinhard", "drago", "mantiuk"] = "log"
+
+    @model_validator(mode="after")
+    def _order(self) -> FusionConfig:
+        if self.mu1 >= self.mu2:
+            raise ValueError(f"mu1 = {self.mu1} must be smaller than mu2 = {self.mu2}")
+        return self
+
+
+class BenchConfig(_Section):
+    """A whole bench: rig, sensor, timing, DTDI, rendering and fusion settings."""
+
+    name: str = "paper_rig"
+    lines: Annotated[int, Field(ge=1, le=1_000_000)] = Field(
+        1024, description="scene lines (output image height) of a default run"
+    )
+    drum: DrumConfig = DrumConfig()
+    lens: LensConfig = LensConfig()
+    target: TargetConfig = TargetConfig()
+    lights: LightsConfig = LightsConfig()
+    sensor: SensorConfig = SensorConfig()
+    timing: TimingConfig = TimingConfig()
+    dtdi: DTDIConfig = DTDIConfig()
+    render: RenderConfig = RenderConfig()
+    fusion: FusionConfig = FusionConfig()
+
+    @model_validator(mode="after")
+    def _cross(self) -> BenchConfig:
+        if self.fusion.mu2 > self.sensor.rows:
+            raise ValueError(
+                f"fusion.mu2 = {self.fusion.mu2} exceeds sensor.rows = {self.sensor.rows} "
+                "(stages are 1..rows)"
+            )
+        half_fov = 0.5 * self.sensor.columns * self.sensor.pixel_pitch_m / self.lens.magnification
+        if half_fov >= 0.5 * self.drum.length_m:
+            raise ValueError(
+                f"drum.length_m = {self.drum.length_m} is shorter than the field of view "
+                f"({2 * half_fov:.4g} m) seen by sensor.columns = {self.sensor.columns}"
+            )
+        half_h = 0.5 * self.sensor.rows * self.sensor.pixel_pitch_m / self.lens.magnification
+        if half_h >= 0.5 * self.drum.radius_m:
+            raise ValueError(
+                f"drum.radius_m = {self.drum.radius_m} is too small for the {2 * half_h:.4g} m "
+                "along-track field of view (must exceed 4 x half height)"
+            )
+        if not math.isfinite(self.lens.magnification):
+            raise ValueError("lens magnification is not finite")
+        return self
+
+
+def _format_loc(loc: tuple[int | str, ...]) -> str:
+    return ".".join(str(p) for p in loc if not (isinstance(p, str) and p.startswith("function-")))
+
+
+def _lookup(data: Any, loc: tuple[int | str, ...]) -> Any:
+    cur = data
+    for part in loc:
+        if isinstance(cur, dict) and part in cur:
+            cur = cur[part]
+        elif isinstance(cur, list | tuple) and isinstance(part, int) and part < len(cur):
+            cur = cur[part]
+        else:
+            return None
+    return cur
+
+
+def _validation_message(exc: ValidationError, data: dict[str, Any], source: str) -> str:
+    err = exc.errors(include_url=False)[0]
+    loc = tuple(err.get("loc", ()))
+    key = _format_loc(loc) or "(top level)"
+    msg = err.get("msg", "invalid")
+    if err.get("type") == "extra_forbidden":
+        return f"config error: {source}: unknown key '{key}' (not a setting of this section)"
+    value = err.get("input") if loc else None
+    if loc and value is None:
+        value = _lookup(data, loc)
+    if isinstance(value, dict):
+        return f"config error: {source}: {key}: {msg.removeprefix('Value error, ')}"
+    return f"config error: {source}: {key} = {value!r}: {msg.removeprefix('Value error, ')}"
+
+
+def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _deep_merge(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def _read_toml(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
+    if not path.is_file():
+        raise ConfigError(f"config error: {path}: no such file")
+    if path in chain:
+        raise ConfigError(f"config error: {path}: 'base' chain loops back to itself")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"config error: {path}: not valid TOML ({exc})") from exc
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ConfigError(f"config error: {path}: base = {base!r}: must be a file name string")
+    base_data = _read_toml((path.parent / base).resolve(), (*chain, path))
+    return _deep_merge(base_data, data)
+
+
+def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> BenchConfig:
+    """Validate a plain dict (as parsed from TOML) into a :class:`BenchConfig`."""
+    try:
+        return BenchConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(_validation_message(exc, data, source)) from None
+
+
+def load_config(path: str | Path | None = None) -> BenchConfig:
+    """Load and validate a bench config from TOML (default: ``scenes/paper_rig.toml``)."""
+    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+    p = p.resolve()
+    return config_from_dict(_read_toml(p), source=str(p))
+
+
+def config_to_toml_dict(cfg: BenchConfig) -> dict[str, Any]:
+    """The fully resolved config as a JSON/TOML-friendly dict (``None`` values dropped)."""
+    return cfg.model_dump(mode="json", exclude_none=True)
+
+
+def config_sha256(cfg: BenchConfig) -> str:
+    """SHA-256 of the resolved config's canonical JSON."""
+    import json
+
+    from bench_sim.io import sha256_text
+
+    return sha256_text(json.dumps(config_to_toml_dict(cfg), sort_keys=True))

@@ -1,0 +1,226 @@
+"""File input/output with metadata: atomic writes, EXR, TIFF, PNG, NPY and JSON.
+
+Every writer goes through :func:`atomic_path`: the file is written under a temporary name in the
+destination folder and renamed into place only when complete, so a failure never leaves a
+partial output behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import tempfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench_sim.errors import BenchSimError
+
+__all__ = [
+    "atomic_path",
+    "write_json",
+    "read_json",
+    "write_exr",
+    "read_exr",
+    "write_tiff16",
+    "write_png",
+    "read_image",
+    "sha256_text",
+    "ImageReadError",
+]
+
+
+class ImageReadError(BenchSimError):
+    """An input image file that cannot be read or is not of a supported kind."""
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+
+    The temporary file keeps the destination's suffix (some writers choose the format from it).
+    On any exception the temporary file is removed and ``path`` is left untouched.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
+        raise
+
+
+def sha256_text(text: str) -> str:
+    """SHA-256 hex digest of a UTF-8 string."""
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def write_json(path: str | os.PathLike[str], data: Mapping[str, Any]) -> Path:
+    """Write ``data`` as indented, key-sorted JSON, atomically."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=_json_default) + "\n")
+    return path
+
+
+def read_json(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Read a JSON file."""
+    return json.loads(Path(path).read_text())
+
+
+def write_exr(
+    path: str | os.PathLike[str],
+    channels: Mapping[str, np.ndarray],
+    metadata: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write 2-D float32 channels of equal shape to one OpenEXR file (ZIP compression).
+
+    Parameters
+    ----------
+    path
+        Destination ``.exr`` file.
+    channels
+        Channel name to 2-D array (height, width); stored as 32-bit float.
+    metadata
+        Stored as the header attribute ``bench_sim`` (a JSON string): config, seed, version, units.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    shapes = {np.asarray(a).shape for a in channels.values()}
+    if len(shapes) != 1 or len(next(iter(shapes))) != 2:
+        raise ValueError(f"EXR channels must be 2-D arrays of one shape, got {sorted(shapes)}")
+    header: dict[str, Any] = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    if metadata is not None:
+        header["bench_sim"] = json.dumps(metadata, sort_keys=True, default=_json_default)
+    chans = {
+        name: np.ascontiguousarray(np.asarray(arr, dtype=np.float32))
+        for name, arr in channels.items()
+    }
+    with atomic_path(path) as tmp, OpenEXR.File(header, chans) as f:
+        f.write(str(tmp))
+    return path
+
+
+def read_exr(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Read an OpenEXR file: (channel name -> 2-D float array, bench_sim metadata or {})."""
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            header = f.header()
+            channels = {name: np.array(ch.pixels) for name, ch in f.channels().items()}
+    except Exception as exc:  # OpenEXR raises plain Exceptions with varying texts
+        raise ImageReadError(f"{path}: not a readable OpenEXR file ({exc})") from exc
+    meta_raw = header.get("bench_sim")
+    meta = json.loads(meta_raw) if isinstance(meta_raw, str) else {}
+    return channels, meta
+
+
+def write_tiff16(
+    path: str | os.PathLike[str], image_dn: np.ndarray, metadata: Mapping[str, Any] | None = None
+) -> Path:
+    """Write a 2-D array of non-negative integers below 65536 as a 16-bit grayscale TIFF.
+
+    The metadata goes into the TIFF ImageDescription tag as JSON.
+    """
+    import tifffile
+
+    arr = np.asarray(image_dn)
+    if arr.ndim != 2:
+        raise ValueError(f"{path}: a 16-bit TIFF needs a 2-D image, got shape {arr.shape}")
+    if arr.size and (arr.min() < 0 or arr.max() > 65535):
+        raise ValueError(f"{path}: values must lie in 0..65535, got {arr.min()}..{arr.max()}")
+    desc = json.dumps(metadata or {}, sort_keys=True, default=_json_default)
+    with atomic_path(path) as tmp:
+        tifffile.imwrite(tmp, arr.astype(np.uint16), description=desc, metadata=None)
+    return Path(path)
+
+
+def write_png(
+    path: str | os.PathLike[str], image: np.ndarray, metadata: Mapping[str, Any] | None = None
+) -> Path:
+    """Write an 8- or 16-bit grayscale (2-D) or RGB (H, W, 3) PNG; metadata as a text chunk."""
+    import imageio.v3 as iio
+
+    arr = np.asarray(image)
+    if arr.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"{path}: PNG needs uint8 or uint16 data, got {arr.dtype}")
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, arr, extension=".png")
+        if metadata is not None:
+            _png_add_text(tmp, "bench_sim", json.dumps(metadata, sort_keys=True, default=_json_default))
+    return Path(path)
+
+
+def _png_add_text(path: Path, key: str, text: str) -> None:
+    """Insert a tEXt chunk after IHDR of an existing PNG file."""
+    import struct
+    import zlib
+
+    data = path.read_bytes()
+    ihdr_end = 8 + 8 + 13 + 4
+    payload = key.encode("latin-1") + b"\x00" + text.encode("latin-1", "replace")
+    chunk = struct.pack(">I", len(payload)) + b"tEXt" + payload
+    chunk += struct.pack(">I", zlib.crc32(b"tEXt" + payload) & 0xFFFFFFFF)
+    path.write_bytes(data[:ihdr_end] + chunk + data[ihdr_end:])
+
+
+def read_image(path: str | os.PathLike[str]) -> np.ndarray:
+    """Read a single-channel image as a float64 2-D array.
+
+    Supported: 8/16-bit grayscale TIFF and PNG, single-channel (or first-channel) EXR, and NPY.
+    Raises :class:`ImageReadError` with the file name for anything else.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ImageReadError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".npy":
+            arr = np.load(path, allow_pickle=False)
+        elif suffix == ".exr":
+            channels, _ = read_exr(path)
+            name = next((n for n in ("Y", "R", "gray") if n in channels), sorted(channels)[0])
+            arr = channels[name]
+        elif suffix in (".tif", ".tiff"):
+            import tifffile
+
+            arr = tifffile.imread(path)
+        elif suffix == ".png":
+            import imageio.v3 as iio
+
+            arr = iio.imread(path)
+        else:
+            raise ImageReadError(
+                f"{path}: unsupported file type '{suffix}' (allowed: .tif, .tiff, .png, .exr, .npy)"
+            )
+    except ImageReadError:
+        raise
+    except Exception as exc:
+        raise ImageReadError(f"{path}: cannot read image ({exc})") from exc
+    arr = np.asarray(arr)
+    if arr.ndim != 2:
+        raise ImageReadError(f"{path}: expected a single-channel 2-D image, got shape {arr.shape}")
+    if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        raise ImageReadError(f"{path}: unsupported pixel type {arr.dtype}")
+    return arr.astype(np.float64)
