@@ -141,6 +141,12 @@ class TargetConfig(_Section):
     wedge_steps: Annotated[int, Field(ge=12, le=64)] = 16
     background: Fraction = 0.30
     uniform_reflectance: Fraction = 0.5
+    finish: Literal["matte", "glossy"] = Field(
+        "matte",
+        description="'matte': Lambertian print; 'glossy': rough dielectric coating over the print "
+        "(glints; reference engine only)",
+    )
+    gloss_roughness: Annotated[float, Field(gt=0, le=1)] = 0.1
 
     @model_validator(mode="after")
     def _range(self) -> TargetConfig:

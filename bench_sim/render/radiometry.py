@@ -1,0 +1,121 @@
+"""Radiometry: scene radiance -> focal-plane irradiance -> photons per pixel per frame.
+
+Mitsuba's film holds pixel-averaged scene radiance ``L`` [W m^-2 sr^-1] (in-band, mono). Neither
+its ``perspective`` nor its ``thinlens`` camera includes the lens' f-number, transmission or
+the cos^4 off-axis fall-off, so they are applied here (see notes/mitsuba-on-cpu.md).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage, special
+
+__all__ = [
+    "PLANCK_J_S",
+    "SPEED_OF_LIGHT_M_S",
+    "photon_energy_j",
+    "focal_plane_irradiance",
+    "photons_per_pixel",
+    "cos_chief_ray",
+    "radiance_to_photons_factor",
+    "airy_pixel_kernel",
+    "apply_psf",
+]
+
+PLANCK_J_S = 6.62607015e-34
+SPEED_OF_LIGHT_M_S = 299_792_458.0
+
+
+def photon_energy_j(wavelength_m: float) -> float:
+    """Energy of one photon, ``h c / lambda`` [J]."""
+    return PLANCK_J_S * SPEED_OF_LIGHT_M_S / wavelength_m
+
+
+def focal_plane_irradiance(
+    radiance_w_m2_sr: np.ndarray | float,
+    f_number: float,
+    magnification: float,
+    transmission: float,
+    cos_theta: np.ndarray | float = 1.0,
+) -> np.ndarray:
+    """Image-plane irradiance of a lens (camera equation) [W m^-2].
+
+    ``E = pi * tau * L * cos^4(theta) / (4 * N^2 * (1 + |m|)^2)``, with ``N (1 + |m|)`` the
+    working f-number.
+    """
+    n_w = f_number * (1.0 + abs(magnification))
+    return (
+        math.pi
+        * transmission
+        * np.asarray(radiance_w_m2_sr, dtype=np.float64)
+        * np.asarray(cos_theta, dtype=np.float64) ** 4
+        / (4.0 * n_w * n_w)
+    )
+
+
+def photons_per_pixel(
+    irradiance_w_m2: np.ndarray | float, pixel_pitch_m: float, t_int_s: float, wavelength_m: float
+) -> np.ndarray:
+    """Mean photons per pixel per frame: ``n_p = E * A_pix * t_int / (h c / lambda)``."""
+    return np.asarray(irradiance_w_m2, dtype=np.float64) * (
+        pixel_pitch_m * pixel_pitch_m * t_int_s / photon_energy_j(wavelength_m)
+    )
+
+
+def cos_chief_ray(rows: int, columns: int, pixel_pitch_m: float, image_distance_m: float) -> np.ndarray:
+    """Cosine of the chief-ray angle at each pixel centre, shape (rows, columns)."""
+    yy = (np.arange(rows) + 0.5 - rows / 2.0) * pixel_pitch_m
+    xx = (np.arange(columns) + 0.5 - columns / 2.0) * pixel_pitch_m
+    r2 = yy[:, None] ** 2 + xx[None, :] ** 2
+    return image_distance_m / np.sqrt(image_distance_m**2 + r2)
+
+
+def radiance_to_photons_factor(
+    rows: int,
+    columns: int,
+    pixel_pitch_m: float,
+    image_distance_m: float,
+    f_number: float,
+    magnification: float,
+    transmission: float,
+    t_int_s: float,
+    wavelength_m: float,
+    cos4: bool = True,
+) -> np.ndarray:
+    """Photons per pixel per frame per unit radiance [photons / (W m^-2 sr^-1)], shape (rows,
+    columns): the camera equation, the pixel area, the integration time and the photon energy
+    in one factor (with the cos^4 fall-off when ``cos4``)."""
+    cos_t = cos_chief_ray(rows, columns, pixel_pitch_m, image_distance_m) if cos4 else 1.0
+    e = focal_plane_irradiance(1.0, f_number, magnification, transmission, cos_t)
+    return np.broadcast_to(photons_per_pixel(e, pixel_pitch_m, t_int_s, wavelength_m), (rows, columns)).copy()
+
+
+def airy_pixel_kernel(
+    working_f_number: float, wavelength_m: float, pixel_pitch_m: float, oversample: int = 16
+) -> np.ndarray:
+    """Fraction of an Airy PSF's energy that falls on each neighbouring pixel when the PSF is
+    centred on a pixel, ``(2r+1, 2r+1)``, summing to 1.
+
+    The Airy intensity is ``[2 J1(x)/x]^2`` with ``x = pi * rho / (lambda N_w)``; it is
+    integrated over each pixel cell on an ``oversample``-times finer grid. The kernel extends to
+    the fifth dark ring (or at least one pixel).
+    """
+    lam_n = wavelength_m * working_f_number
+    radius_m = 5.0 * 1.22 * lam_n
+    r = max(1, math.ceil(radius_m / pixel_pitch_m - 0.5))
+    n = (2 * r + 1) * oversample
+    coords = ((np.arange(n) + 0.5) / oversample - (r + 0.5)) * pixel_pitch_m
+    rho = np.hypot(coords[:, None], coords[None, :])
+    x = np.pi * rho / lam_n
+    with np.errstate(invalid="ignore", divide="ignore"):
+        i = np.where(x > 1e-9, (2.0 * special.j1(x) / x) ** 2, 1.0)
+    k = i.reshape(2 * r + 1, oversample, 2 * r + 1, oversample).sum(axis=(1, 3))
+    return k / k.sum()
+
+
+def apply_psf(frames: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """Convolve each frame (last two axes) with a small PSF kernel; edges replicate."""
+    k = kernel.reshape((1,) * (frames.ndim - 2) + kernel.shape)
+    return ndimage.convolve(frames, k, mode="nearest")

@@ -1,0 +1,191 @@
+"""The target as seen during a run: a reflectance grid aligned with the drum's motion, and the
+Mitsuba texture plugin that reads it at the moving material coordinate.
+
+Grid
+    Texel ``(a, b)`` sits at along-track material coordinate ``y = y_start + a * h_y`` and axial
+    coordinate ``x = x_start + b * h_x``. ``h_y = delta / q`` with ``delta`` the surface travel per
+    line period and ``q = target.texels_per_pixel``, so one line period moves the material by
+    exactly ``q`` texels: the fast engine then turns the drum by index arithmetic alone.
+    ``h_x = object_pixel / q``. The grid covers exactly the material that passes the field of
+    view during the run, plus margins.
+
+Plugin
+    ``albedo(p, t) = T(y_material(theta(p), t0 + t), x)`` with bilinear interpolation, where
+    ``theta(p) = atan2(-p.y, p.z)``, ``t0`` is the frame's start time (an opaque Dr.Jit scalar, so
+    changing it reuses the compiled kernel) and ``t`` the ray's time in ``[0, t_int]`` (smear).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bench_sim.config import BenchConfig
+from bench_sim.rig.geometry import RigGeometry
+from bench_sim.rig.target import TargetPanel, make_panel, rasterize
+
+__all__ = ["RunTexture", "run_texture", "drum_texture", "smear_filter"]
+
+_MARGIN_PX = 6.0
+
+
+@dataclass(frozen=True)
+class RunTexture:
+    """Reflectance on a motion-aligned grid (see module docstring). ``values`` is (ny, nx)."""
+
+    values: np.ndarray
+    y_start_m: float
+    h_y_m: float
+    x_start_m: float
+    h_x_m: float
+    q: int
+    panel: TargetPanel
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.values.shape  # type: ignore[return-value]
+
+
+def run_texture(cfg: BenchConfig, geom: RigGeometry, first_frame: int, frames: int) -> RunTexture:
+    """Rasterise the target for frames ``first_frame .. first_frame + frames - 1``."""
+    p = geom.object_pixel_m
+    q = cfg.target.texels_per_pixel
+    h_y = geom.delta_m / q
+    h_x = p / q
+    th = geom.row_theta_rad
+    t0 = first_frame * geom.line_period_s
+    t1 = (first_frame + frames - 1) * geom.line_period_s + geom.t_int_s
+    y_lo = float(geom.y_material(th.max(), t0)) - _MARGIN_PX * p
+    y_hi = float(geom.y_material(th.min(), t1)) + _MARGIN_PX * p
+    # anchor the grid at y = 0 (scene line 0) so that runs starting at other frames share nodes
+    a0 = int(np.floor(y_lo / h_y))
+    ny = int(np.ceil(y_hi / h_y)) - a0 + 1
+    half_w = 0.5 * cfg.sensor.columns * p * 1.01 + _MARGIN_PX * p
+    nx = int(np.ceil(2 * half_w / h_x)) + 1
+    x_start = -0.5 * (nx - 1) * h_x
+    circumference_px = 2 * np.pi * geom.radius_m / p
+    panel = make_panel(cfg.target, circumference_px)
+    # panel coordinates: u = y / p (lines), v = x / p + columns / 2
+    vals = rasterize(
+        panel,
+        u0_px=a0 * h_y / p,
+        nu=ny,
+        hu_px=h_y / p,
+        v0_px=x_start / p + cfg.target.panel_columns / 2.0,
+        nv=nx,
+        hv_px=h_x / p,
+    )
+    return RunTexture(vals, a0 * h_y, h_y, x_start, h_x, q, panel)
+
+
+def smear_filter(values: np.ndarray, h_y_m: float, smear_m: float) -> np.ndarray:
+    """Box-filter along the track: ``A_s(y) = (1/S) * int_0^S A(y + s) ds`` for the piecewise-linear
+    interpolant of ``values`` (axis 0), evaluated at the grid nodes; ``S = smear_m``.
+
+    Exact for the linear interpolant: the integral is the cumulative trapezoid plus the exact
+    partial segment. Nodes within ``S`` of the end use the last value beyond it (edge clamp).
+    """
+    if smear_m <= 0:
+        return values.astype(np.float32)
+    v = values.astype(np.float64)
+    n = v.shape[0]
+    s = smear_m / h_y_m  # in texels
+    cum = np.zeros_like(v)
+    np.cumsum(0.5 * (v[1:] + v[:-1]), axis=0, out=cum[1:])
+    si = int(round(s))
+    if abs(s - si) < 1e-9 and si < n:
+        # whole texels (t_int a whole number of texel shifts): a difference of the cumulative sum
+        out = np.empty_like(v)
+        out[: n - si] = (cum[si:] - cum[: n - si]) / si
+        beyond = (si - (n - 1 - np.arange(n - si, n)))[:, None]  # texels past the last node
+        out[n - si :] = (cum[-1] - cum[n - si :] + beyond * v[-1]) / si
+        return out.astype(np.float32)
+
+    def integral_to(pos: np.ndarray) -> np.ndarray:
+        # integral of the linear interpolant from node 0 to position pos (texel units)
+        pos = np.clip(pos, 0, n - 1)
+        i = np.minimum(np.floor(pos).astype(int), n - 2)
+        f = (pos - i)[:, None] if v.ndim > 1 else pos - i
+        a, b = v[i], v[i + 1]
+        return cum[i] + f * a + 0.5 * f * f * (b - a)
+
+    idx = np.arange(n, dtype=np.float64)
+    out = (integral_to(idx + s) - cum) / s
+    # past the end the clamped integral shrinks: extend with the last value
+    tail = idx + s > n - 1
+    if tail.any():
+        covered = np.clip(n - 1 - idx[tail], 0, None)
+        extra = (s - covered)[:, None] * v[-1][None, :] if v.ndim > 1 else (s - covered) * v[-1]
+        out[tail] = (integral_to(idx[tail] + s) - cum[tail] + extra) / s
+    return out.astype(np.float32)
+
+
+_CLASS_CACHE: dict[str, Any] = {}
+
+
+def _texture_class(mi: Any) -> Any:
+    variant = mi.variant()
+    if variant in _CLASS_CACHE:
+        return _CLASS_CACHE[variant]
+    import drjit as dr
+
+    class DrumTargetTexture(mi.Texture):
+        """Reflectance of the moving drum target (see module docstring)."""
+
+        def __init__(self, props: Any) -> None:
+            super().__init__(props)
+            self.t0 = dr.opaque(mi.Float, 0.0)
+
+        def setup(self, grid: RunTexture, geom: RigGeometry, constant: float | None = None) -> None:
+            self.constant = constant
+            ny, nx = grid.shape
+            tensor = mi.TensorXf(np.ascontiguousarray(grid.values[:, :, None], dtype=np.float32))
+            self.tex = mi.Texture2f(
+                tensor, use_accel=False, filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp
+            )
+            self.R = float(geom.radius_m)
+            self.omega = float(geom.omega_rad_s)
+            self.y_off = float(geom.y_offset_m)
+            # normalised texture coordinate = (coord - start) * scale + 0.5 / n
+            self.sy, self.oy = 1.0 / (grid.h_y_m * ny), 0.5 / ny - grid.y_start_m / (grid.h_y_m * ny)
+            self.sx, self.ox = 1.0 / (grid.h_x_m * nx), 0.5 / nx - grid.x_start_m / (grid.h_x_m * nx)
+            self._mean = float(grid.values.mean())
+
+        def set_frame_start(self, t0_s: float) -> None:
+            self.t0 = dr.opaque(mi.Float, float(t0_s))
+
+        def _albedo(self, si: Any) -> Any:
+            theta = dr.atan2(-si.p.y, si.p.z)
+            y = self.R * (self.omega * (self.t0 + si.time) - theta) + self.y_off
+            uv = mi.Point2f(si.p.x * self.sx + self.ox, y * self.sy + self.oy)
+            return self.tex.eval(uv)[0]
+
+        def eval(self, si: Any, active: Any = True) -> Any:
+            return mi.UnpolarizedSpectrum(self._albedo(si))
+
+        def eval_1(self, si: Any, active: Any = True) -> Any:
+            return self._albedo(si)
+
+        def mean(self) -> float:
+            return self._mean
+
+        def is_spatially_varying(self) -> bool:
+            return True
+
+        def to_string(self) -> str:
+            return "DrumTargetTexture[]"
+
+    name = f"bench_sim_drum_target_{variant}"
+    mi.register_texture(name, lambda props: DrumTargetTexture(props))
+    _CLASS_CACHE[variant] = name
+    return name
+
+
+def drum_texture(mi: Any, grid: RunTexture, geom: RigGeometry) -> Any:
+    """A Mitsuba texture instance showing ``grid`` on the moving drum."""
+    name = _texture_class(mi)
+    tex = mi.load_dict({"type": name})
+    tex.setup(grid, geom)
+    return tex
