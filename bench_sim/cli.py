@@ -92,7 +92,7 @@ def doctor() -> None:
 @_user_errors
 def render(
     config: ConfigArg = DEFAULT_CONFIG_PATH,
-    frames: Annotated[int, typer.Option("--frames", min=1, help="line periods to render")] = 8,
+    frames: Annotated[int, typer.Option("--frames", help="line periods to render")] = 8,
     engine: Annotated[
         str | None, typer.Option("--engine", help="fast | reference (default: the config's)")
     ] = None,

@@ -166,11 +166,11 @@ class SpotLightConfig(_Section):
     """
 
     enabled: bool = True
-    irradiance_w_m2: Annotated[float, Field(ge=0)] = 100.0
+    irradiance_w_m2: Annotated[float, Field(ge=0)] = 128.0
     position_m: tuple[float, float, float] = (-0.10, 0.25, 0.45)
-    aim_m: tuple[float, float, float] = (-0.012, 0.0, 0.10)
-    cutoff_deg: Annotated[float, Field(gt=0, le=90)] = 2.2
-    beam_width_deg: Annotated[float, Field(gt=0, le=90)] = 1.8
+    aim_m: tuple[float, float, float] = (-0.0155, 0.0, 0.10)
+    cutoff_deg: Annotated[float, Field(gt=0, le=90)] = 2.0
+    beam_width_deg: Annotated[float, Field(gt=0, le=90)] = 1.9
 
     @model_validator(mode="after")
     def _beam(self) -> SpotLightConfig:
@@ -189,7 +189,7 @@ class FillLightConfig(_Section):
     """
 
     enabled: bool = True
-    irradiance_w_m2: Annotated[float, Field(ge=0)] = 4.0
+    irradiance_w_m2: Annotated[float, Field(ge=0)] = 5.5
 
 
 class LightsConfig(_Section):
@@ -216,7 +216,7 @@ class SensorConfig(_Section):
     )
     prnu: Annotated[float, Field(ge=0, le=0.5)] = 0.01
     column_offset_dn: Annotated[float, Field(ge=0)] = Field(
-        0.5, description="rms of the per-column offset of the CMOS column amplifiers [DN]"
+        0.1, description="rms of the per-column offset of the CMOS column amplifiers [DN]"
     )
     conversion_gain_dn_per_e: PositiveFloat = Field(
         0.072, description="K: digital numbers per electron"
@@ -363,8 +363,9 @@ def _validation_message(exc: ValidationError, data: dict[str, Any], source: str)
     value = err.get("input") if loc else None
     if loc and value is None:
         value = _lookup(data, loc)
-    if isinstance(value, dict):
-        return f"config error: {source}: {key}: {msg.removeprefix('Value error, ')}"
+    if isinstance(value, dict) or not loc:
+        where = f"{key}: " if loc else ""
+        return f"config error: {source}: {where}{msg.removeprefix('Value error, ')}"
     return f"config error: {source}: {key} = {value!r}: {msg.removeprefix('Value error, ')}"
 
 

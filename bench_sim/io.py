@@ -52,6 +52,9 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp creates 0600; give the usual permissions
         os.replace(tmp_path, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -127,12 +130,13 @@ def read_exr(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[
 
     try:
         with OpenEXR.File(str(path), separate_channels=True) as f:
-            header = f.header()
-            channels = {name: np.array(ch.pixels) for name, ch in f.channels().items()}
+            # copy out while the file is open: the header does not outlive it
+            meta_raw = f.header().get("bench_sim")
+            meta_text = str(meta_raw) if isinstance(meta_raw, str) else None
+            channels = {name: np.array(ch.pixels, copy=True) for name, ch in f.channels().items()}
     except Exception as exc:  # OpenEXR raises plain Exceptions with varying texts
         raise ImageReadError(f"{path}: not a readable OpenEXR file ({exc})") from exc
-    meta_raw = header.get("bench_sim")
-    meta = json.loads(meta_raw) if isinstance(meta_raw, str) else {}
+    meta = json.loads(meta_text) if meta_text else {}
     return channels, meta
 
 

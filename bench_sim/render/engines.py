@@ -43,7 +43,9 @@ class ReferenceEngine:
 
     name = "reference"
 
-    def __init__(self, mi: Any, cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, seed: int) -> None:
+    def __init__(
+        self, mi: Any, cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, seed: int, first_frame: int = 0
+    ) -> None:
         self.mi, self.cfg, self.geom = mi, cfg, geom
         self.spp = cfg.render.spp
         self.seed = int(seed)
@@ -89,9 +91,12 @@ class FastEngine:
 
     name = "fast"
 
-    def __init__(self, mi: Any, cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, seed: int) -> None:
+    def __init__(
+        self, mi: Any, cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, seed: int, first_frame: int = 0
+    ) -> None:
         check_fast_engine_valid(cfg)
         self.cfg, self.geom, self.grid = cfg, geom, grid
+        self.first_frame = int(first_frame)
         M, N, ss = cfg.sensor.rows, cfg.sensor.columns, cfg.render.subpixels
         spp = cfg.render.spp
 
@@ -125,7 +130,7 @@ class FastEngine:
         cfg, geom, grid = self.cfg, self.geom, self.grid
         M, N, ss, q = cfg.sensor.rows, cfg.sensor.columns, cfg.render.subpixels, grid.q
         theta = np.arctan2(-pos[..., 1].astype(np.float64), pos[..., 2].astype(np.float64))
-        y0 = geom.y_material(theta, 0.0)
+        y0 = geom.y_material(theta, self.first_frame * geom.line_period_s)  # kernels at the first frame
         fy = (y0 - grid.y_start_m) / grid.h_y_m
         fx = (pos[..., 0].astype(np.float64) - grid.x_start_m) / grid.h_x_m
         col = np.broadcast_to(np.arange(N * ss) // ss, fy.shape)
@@ -172,12 +177,12 @@ class FastEngine:
             ty, tx = kern.weights.shape[:2]
             for a in range(ty):
                 ya = kern.base_y + a
-                r0 = ya // q + k0
+                r0 = ya // q + k0 - self.first_frame
                 for b in range(tx):
                     xb = kern.base_x + b
                     c0 = xb // q
                     plane = self._planes[ya % q][xb % q]
-                    if r0 + nk > plane.shape[0] or c0 + N > plane.shape[1]:
+                    if r0 < 0 or r0 + nk > plane.shape[0] or c0 + N > plane.shape[1]:
                         raise RuntimeError("fast engine: frame outside the run texture")
                     np.multiply(plane[r0 : r0 + nk, c0 : c0 + N], kern.weights[a, b], out=tmp)
                     acc += tmp

@@ -79,7 +79,7 @@ def prepare(
     grid = run_texture(cfg, geom, first_frame, frames)
     seed = int(rng.integers(0, 2**31 - 1))
     cls = FastEngine if name == "fast" else ReferenceEngine
-    eng = cls(mi, cfg, geom, grid, seed)
+    eng = cls(mi, cfg, geom, grid, seed, first_frame)
     s, lens = cfg.sensor, cfg.lens
     factor = radiance_to_photons_factor(
         s.rows,

@@ -26,7 +26,7 @@ from bench_sim.config import BenchConfig
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.target import TargetPanel, make_panel, rasterize
 
-__all__ = ["RunTexture", "run_texture", "drum_texture", "smear_filter"]
+__all__ = ["RunTexture", "run_texture", "drum_texture", "smear_filter", "ground_truth_reflectance"]
 
 _MARGIN_PX = 6.0
 
@@ -189,3 +189,26 @@ def drum_texture(mi: Any, grid: RunTexture, geom: RigGeometry) -> Any:
     tex = mi.load_dict({"type": name})
     tex.setup(grid, geom)
     return tex
+
+
+def ground_truth_reflectance(
+    cfg: BenchConfig, geom: RigGeometry, panel: TargetPanel, lines: int
+) -> np.ndarray:
+    """The target's reflectance behind each output pixel: scene line ``j`` (material at
+    ``y = j * delta``) and column ``n`` (``x`` of the column centre on the optical axis),
+    box-averaged over the pixel's footprint on the drum (4 x 4 samples). Shape (lines, columns).
+
+    This is the exact ground truth a validation data set is judged against: what a perfect
+    sensor in perfect sync would report, divided by the illumination.
+    """
+    p = geom.object_pixel_m
+    n = cfg.sensor.columns
+    s = 4
+    offs = (np.arange(s) + 0.5) / s - 0.5
+    u = np.arange(lines) * geom.delta_m / p
+    v = np.arange(n) + 0.5 - n / 2.0 + cfg.target.panel_columns / 2.0
+    acc = np.zeros((lines, n), dtype=np.float64)
+    for ou in offs:
+        for ov in offs:
+            acc += panel.reflectance_grid(u + ou * geom.delta_m / p, v + ov)
+    return (acc / (s * s)).astype(np.float32)

@@ -1,0 +1,76 @@
+"""``bench-sim render``: exposures of a pass to ``DIR/exposures.exr`` and ``DIR/meta.json``.
+
+``exposures.exr`` holds one channel ``photons`` of height ``frames * rows`` and width
+``columns``: frame ``k`` is rows ``k*M .. k*M + M - 1``. The header attribute ``bench_sim``
+(JSON) carries the shape ``[frames, rows, columns]``, units and provenance; :func:`read_exposures`
+returns the ``(frames, rows, columns)`` array. ``ground_truth.exr`` holds the target reflectance
+behind each complete output line (channel ``reflectance``, shape ``(frames - rows + 1, columns)``).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench_sim.config import BenchConfig
+from bench_sim.errors import BenchSimError
+from bench_sim.experiments.provenance import provenance
+from bench_sim.io import read_exr, write_exr, write_json
+
+__all__ = ["run_render", "read_exposures"]
+
+UNITS = {
+    "photons": "mean photons per pixel per frame (in-band, at sensor.wavelength_m)",
+    "reflectance": "diffuse reflectance 0..1 (ground truth)",
+    "frame_k_time_s": "k * timing.line_period_s",
+}
+
+
+def run_render(
+    cfg: BenchConfig, *, frames: int, engine: str | None, seed: int, out: Path
+) -> dict[str, Any]:
+    """Render ``frames`` line periods and write ``exposures.exr``, ``ground_truth.exr`` and
+    ``meta.json`` into ``out``. Returns the metadata."""
+    from bench_sim.render.exposures import render_photons
+    from bench_sim.render.texture import ground_truth_reflectance
+
+    if frames < 1:
+        raise BenchSimError(f"--frames = {frames}: must be at least 1")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise BenchSimError(f"--out = {str(out)!r}: exists and is not a folder")
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    photons, setup = render_photons(cfg, frames, rng, engine=engine)
+    K, M, N = photons.shape
+    lines = max(K - M + 1, 0)
+    truth = ground_truth_reflectance(cfg, setup.geom, setup.grid.panel, lines) if lines else None
+    meta = provenance(
+        cfg,
+        seed,
+        kind="exposures",
+        shape=[K, M, N],
+        layout="frame k = image rows k*M .. k*M+M-1",
+        units=UNITS,
+        render=setup.info,
+        backend=setup.backend.as_dict(),
+        wall_s=round(time.perf_counter() - t0, 3),
+    )
+    write_exr(out / "exposures.exr", {"photons": photons.reshape(K * M, N)}, meta)
+    if truth is not None:
+        tmeta = dict(meta, kind="ground_truth", shape=[lines, N], layout="scene line j = row j")
+        write_exr(out / "ground_truth.exr", {"reflectance": truth}, tmeta)
+    write_json(out / "meta.json", meta)
+    return meta
+
+
+def read_exposures(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
+    """Read ``exposures.exr``: photons (frames, rows, columns) and its metadata."""
+    channels, meta = read_exr(path)
+    if "photons" not in channels or "shape" not in meta:
+        raise BenchSimError(f"{path}: not a bench_sim exposures file (no 'photons' channel/shape)")
+    K, M, N = meta["shape"]
+    return channels["photons"].reshape(K, M, N), meta

@@ -1,0 +1,97 @@
+"""Variant choice: never let a bad libLLVM abort the process; tested without a broken library."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from bench_sim import backend
+from bench_sim.backend import ProbeResult, choose_backend, probe_llvm, variant_for
+
+
+def _fake_proc(returncode: int, stdout: str = "", stderr: str = ""):
+    def runner(cmd, **kwargs):
+        return subprocess.CompletedProcess(cmd, returncode, stdout, stderr)
+
+    return runner
+
+
+@pytest.fixture(autouse=True)
+def _isolated_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("BENCH_SIM_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("BENCH_SIM_VARIANT", raising=False)
+
+
+def test_llvm_abort_in_child_is_a_rejection_not_a_crash(tmp_path):
+    # what Debian 12's libLLVM 15/16 do: LLVM prints and the process dies of SIGABRT
+    runner = _fake_proc(-6, stderr="LLVM ERROR: Cannot select: 0x55 f32 = fminimum 0x1, 0x2\n")
+    res = probe_llvm("/fake/libLLVM-15.so", runner=runner)
+    assert not res.ok
+    assert "signal 6" in res.detail and "Cannot select" in res.detail
+
+
+def test_a_real_child_that_aborts_leaves_the_parent_alive(tmp_path):
+    """The probe runs in a real child process that aborts like LLVM does."""
+
+    def aborting_runner(cmd, **kwargs):
+        return subprocess.run([sys.executable, "-c", "import os; os.abort()"], **kwargs)
+
+    res = probe_llvm("/fake/libLLVM-16.so", runner=aborting_runner)
+    assert not res.ok and "signal" in res.detail
+
+
+def test_probe_verdicts_are_cached_per_library():
+    calls = []
+
+    def runner(cmd, **kwargs):
+        calls.append(kwargs["env"][backend.ENV_LLVM])
+        return subprocess.CompletedProcess(cmd, 0, "BENCH_SIM_LLVM_OK\n", "")
+
+    assert probe_llvm("/fake/libLLVM.so.19.1", runner=runner).ok
+    again = probe_llvm("/fake/libLLVM.so.19.1", runner=runner)
+    assert again.ok and "cached" in again.detail
+    assert calls == ["/fake/libLLVM.so.19.1"]
+
+
+def test_choice_prefers_cuda_then_first_working_llvm_then_scalar():
+    ok, bad = ProbeResult(True, "fine"), ProbeResult(False, "Cannot select: fminimum")
+    libs = ["/l/libLLVM-15.so", "/l/libLLVM.so.19.1"]
+    verdict = {"/l/libLLVM-15.so": bad, "/l/libLLVM.so.19.1": ok}
+    c = choose_backend(cuda_probe=lambda: ok, llvm_probe=verdict.__getitem__, candidates=lambda: libs)
+    assert (c.variant, c.kind, c.llvm_path) == ("cuda_ad_mono", "cuda", None)
+    c = choose_backend(cuda_probe=lambda: bad, llvm_probe=verdict.__getitem__, candidates=lambda: libs)
+    assert (c.variant, c.llvm_path) == ("llvm_ad_mono", "/l/libLLVM.so.19.1")
+    assert "rejected" in c.probes["/l/libLLVM-15.so"]
+    with pytest.warns(RuntimeWarning, match="scalar"):
+        c = choose_backend(cuda_probe=lambda: bad, llvm_probe=lambda p: bad, candidates=lambda: libs)
+    assert (c.variant, c.kind) == ("scalar_rgb", "scalar")
+
+
+def test_explicit_choices_and_bad_names():
+    ok = ProbeResult(True, "fine")
+    c = choose_backend(
+        "llvm", "rgb", cuda_probe=lambda: ok, llvm_probe=lambda p: ok, candidates=lambda: ["/x"]
+    )
+    assert c.variant == "llvm_ad_rgb"  # 'llvm' skips CUDA even where it works
+    c = choose_backend("scalar", cuda_probe=lambda: ok, llvm_probe=lambda p: ok, candidates=lambda: [])
+    assert c.variant == "scalar_rgb"
+    with pytest.raises(ValueError, match="render.variant"):
+        choose_backend("vulkan_ad_mono", cuda_probe=lambda: ok, llvm_probe=lambda p: ok, candidates=list)
+    assert variant_for("scalar", "mono") == "scalar_rgb"  # the wheel has no scalar_mono
+
+
+def test_candidates_put_the_environment_first_and_newest_next(monkeypatch, tmp_path):
+    fake = tmp_path / "libLLVM-99.so"
+    fake.write_bytes(b"")
+    monkeypatch.setenv(backend.ENV_LLVM, str(fake))
+    cands = backend.llvm_candidates()
+    assert cands[0] == str(fake)
+    assert backend._llvm_version_key("/usr/lib/libLLVM.so.19.1") > backend._llvm_version_key("libLLVM-15.so")
+
+
+def test_real_probe_of_this_machine_finds_a_working_backend():
+    """On the project's machines (setup installs libllvm19) the LLVM backend passes its probe."""
+    choice = choose_backend()
+    assert choice.kind in ("cuda", "llvm"), choice.probes

@@ -1,0 +1,50 @@
+"""Config: defaults = paper rig, TOML loading with presets, one-line errors naming key and value."""
+
+from __future__ import annotations
+
+import pytest
+
+from bench_sim.config import DEFAULT_CONFIG_PATH, BenchConfig, ConfigError, load_config
+
+
+def test_default_file_matches_model_defaults_where_it_restates_them():
+    cfg = load_config()
+    assert cfg == BenchConfig()  # scenes/paper_rig.toml restates the defaults explicitly
+
+
+def test_presets_load_and_differ_only_in_lights():
+    base = load_config()
+    for name in ("strong.toml", "weak.toml"):
+        cfg = load_config(DEFAULT_CONFIG_PATH.parent / name)
+        assert cfg.sensor == base.sensor and cfg.drum == base.drum
+        assert cfg.lights != base.lights
+
+
+@pytest.mark.parametrize(
+    ("toml", "needle"),
+    [
+        ("[sensor]\nrows = 0\n", "sensor.rows = 0: Input should be greater than or equal to 1"),
+        ("[sensor]\nbogus = 1\n", "unknown key 'sensor.bogus'"),
+        ("[fusion]\nmu1 = 80\nmu2 = 10\n", "mu1 = 80 must be smaller than mu2 = 10"),
+        ("[lens]\nmodel = 'fisheye'\n", "lens.model = 'fisheye'"),
+        ("[timing]\nintegration_time_s = 1.0\n", "must not exceed line_period_s"),
+        ("[sensor]\nrows = [\n", "not valid TOML"),
+        ("base = 'nope.toml'\n", "nope.toml: no such file"),
+    ],
+)
+def test_bad_configs_give_one_line_naming_key_and_value(tmp_path, toml, needle):
+    path = tmp_path / "bad.toml"
+    path.write_text(toml)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert needle in msg
+    assert msg.startswith("config error: ")
+
+
+def test_base_chain_overrides(tmp_path):
+    (tmp_path / "a.toml").write_text(f"base = '{DEFAULT_CONFIG_PATH}'\n[sensor]\nrows = 90\n")
+    (tmp_path / "b.toml").write_text("base = 'a.toml'\n[dtdi]\nbeta_bits = 16\n")
+    cfg = load_config(tmp_path / "b.toml")
+    assert (cfg.sensor.rows, cfg.dtdi.beta_bits, cfg.sensor.columns) == (90, 16, 1024)
