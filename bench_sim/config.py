@@ -189,7 +189,7 @@ class FillLightConfig(_Section):
     """
 
     enabled: bool = True
-    irradiance_w_m2: Annotated[float, Field(ge=0)] = 5.5
+    irradiance_w_m2: Annotated[float, Field(ge=0)] = 6.0
 
 
 class LightsConfig(_Section):

@@ -89,19 +89,20 @@ def smear_filter(values: np.ndarray, h_y_m: float, smear_m: float) -> np.ndarray
     """
     if smear_m <= 0:
         return values.astype(np.float32)
-    v = values.astype(np.float64)
-    n = v.shape[0]
+    n = values.shape[0]
     s = smear_m / h_y_m  # in texels
+    si = int(round(s))
+    if abs(s - si) < 1e-9 and 0 < si < n:
+        # whole texels (the usual case, t_int = T): the trapezoid rule over si + 1 nodes is the
+        # exact integral of the linear interpolant; the last nodes clamp to the last value
+        v32 = np.concatenate([values, np.repeat(values[-1:], si, axis=0)]).astype(np.float32)
+        out = 0.5 * (v32[:n] + v32[si : si + n])
+        for j in range(1, si):
+            out += v32[j : j + n]
+        return out / np.float32(si)
+    v = values.astype(np.float64)
     cum = np.zeros_like(v)
     np.cumsum(0.5 * (v[1:] + v[:-1]), axis=0, out=cum[1:])
-    si = int(round(s))
-    if abs(s - si) < 1e-9 and si < n:
-        # whole texels (t_int a whole number of texel shifts): a difference of the cumulative sum
-        out = np.empty_like(v)
-        out[: n - si] = (cum[si:] - cum[: n - si]) / si
-        beyond = (si - (n - 1 - np.arange(n - si, n)))[:, None]  # texels past the last node
-        out[n - si :] = (cum[-1] - cum[n - si :] + beyond * v[-1]) / si
-        return out.astype(np.float32)
 
     def integral_to(pos: np.ndarray) -> np.ndarray:
         # integral of the linear interpolant from node 0 to position pos (texel units)

@@ -99,6 +99,13 @@ class TargetPanel:
                 out[np.ix_(iu, iv)] = paint(uu, vb).reshape(iu.size, iv.size)
         return out
 
+    def element_box(self, name: str, half: str) -> tuple[float, float, float, float]:
+        """Box ``(u0, u1, v0, v1)`` [panel pixels] of a ``paper`` layout element (``"wedge"``,
+        ``"star"``, ``"vbars"``, ``"hbars"``, ``"text"``) in the ``"left"`` or ``"right"`` half."""
+        u0, u1, v0, v1 = _layout(self.cfg)[name]
+        off = 0.0 if half == "left" else self.cfg.panel_columns / 2.0
+        return u0, u1, v0 + off, v1 + off
+
     def _base(self) -> float:
         return self.cfg.uniform_reflectance if self.cfg.layout == "uniform" else self.cfg.background
 

@@ -1,0 +1,339 @@
+"""``bench-sim reproduce``: the paper's experiment end to end.
+
+Render the default rig (all frames of one pass) -> EMVA 1288 sensor -> DTDI (every Fig. 3 stage
+from the same pass) -> fusion at ``mu1``, ``mu2`` (eq. 11) -> ``Gamma_TRA`` -> metrics (Table 1 /
+eq. 16-18, eq. 15, measured dynamic range through the whole chain) -> figures and report.
+
+Outputs (``results/paper`` by default): ``fig3_stages.png``, ``fig4_hdr.png``, ``gamma1.tiff``,
+``gamma2.tiff`` (16-bit), ``gamma_hdr.exr`` (channels ``Y`` = Gamma_HDR [DN, stage-mu2 units] and
+``source`` = the stage each pixel came from), ``gamma_tra.png``, ``table1.csv``, ``metrics.json``,
+``report.md``. Every file carries the config, seed and version.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import io
+import math
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench_sim.config import BenchConfig, config_from_dict, config_to_toml_dict
+from bench_sim.errors import BenchSimError
+from bench_sim.experiments.provenance import provenance
+
+__all__ = ["run_reproduce", "quick_config", "PAPER", "FIG3_STAGES", "QUICK_OVERRIDES"]
+
+FIG3_STAGES: tuple[int, ...] = tuple(range(5, 101, 5))
+
+#: The paper's numbers (Table 1, section 3).
+PAPER = {
+    "omega": {"gamma1": 28931332, "gamma2": 4689332, "gamma_hdr": 23937472},
+    "delta_psi_db": 26.02,
+    "mu1": 10,
+    "mu2": 80,
+}
+
+#: SNR below which a patch counts as "in the noise", and the Rose criterion for "out of it"
+SNR_IN_NOISE = 2.0
+SNR_ROSE = 3.0
+
+#: ``--quick``: the same experiment on a 256-column sensor and 256 lines (CI, first runs).
+QUICK_OVERRIDES: dict[str, Any] = {
+    "lines": 256,
+    "sensor": {"columns": 256},
+    "target": {"panel_lines": 256, "panel_columns": 256},
+    "render": {"spp": 8},
+}
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def quick_config(cfg: BenchConfig) -> BenchConfig:
+    """The ``--quick`` preset of a config (:data:`QUICK_OVERRIDES`)."""
+    return config_from_dict(_merge(config_to_toml_dict(cfg), QUICK_OVERRIDES), source="--quick preset")
+
+
+class _Timer:
+    def __init__(self) -> None:
+        self.steps: dict[str, float] = {}
+
+    def add(self, name: str, seconds: float) -> None:
+        self.steps[name] = self.steps.get(name, 0.0) + seconds
+
+
+def _timed_frames(
+    frames: Iterator[np.ndarray], timer: _Timer, progress: Any, task: Any
+) -> Iterator[np.ndarray]:
+    """Pass frames through, charging the time spent producing them to ``render_frames``."""
+    while True:
+        t0 = time.perf_counter()
+        try:
+            chunk = next(frames)
+        except StopIteration:
+            return
+        timer.add("render_frames", time.perf_counter() - t0)
+        progress.update(task, advance=chunk.shape[0])
+        yield chunk
+
+
+def _patch_slices(panel: Any, geom: Any, cfg: BenchConfig, lines: int) -> dict[str, tuple[slice, slice]]:
+    """Patch name -> (line slice, column slice) in the output images."""
+    scale = geom.object_pixel_m / geom.delta_m  # panel pixels -> lines (1 in sync)
+    n = cfg.sensor.columns
+    off = n / 2.0 - cfg.target.panel_columns / 2.0 - 0.5  # column = v + off
+    out = {}
+    for p in panel.patches:
+        l0, l1 = math.ceil(p.u0 * scale), math.floor(p.u1 * scale)
+        c0, c1 = math.ceil(p.v0 + off), math.floor(p.v1 + off)
+        if 0 <= l0 < l1 <= lines and 0 <= c0 < c1 <= n:
+            out[p.name] = (slice(l0, l1), slice(c0, c1))
+    return out
+
+
+def _box(panel: Any, cfg: BenchConfig, name: str, half: str, lines: int) -> tuple[int, int, int, int]:
+    u0, u1, v0, v1 = panel.element_box(name, half)
+    off = cfg.sensor.columns / 2.0 - cfg.target.panel_columns / 2.0
+    return (
+        max(int(u0), 0),
+        min(int(math.ceil(u1)), lines),
+        max(int(v0 + off), 0),
+        min(int(math.ceil(v1 + off)), cfg.sensor.columns),
+    )
+
+
+def _spatial_snr(img: np.ndarray, sl: tuple[slice, slice]) -> float:
+    region = np.asarray(img[sl], dtype=np.float64)
+    sd = float(region.std())
+    return float(region.mean() / sd) if sd > 0 else float("inf")
+
+
+def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False) -> dict[str, Any]:
+    """Run the reproduction and write its outputs into ``out``. Returns ``metrics.json``'s dict."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from bench_sim.experiments.dynamic_range import measure_dynamic_range
+    from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+    from bench_sim.fusion.tonemap import quantize_display, tone_map
+    from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
+    from bench_sim.metrics.histogram import evaluate_eq18
+    from bench_sim.render.exposures import iter_photon_frames, prepare
+    from bench_sim.sensor.pipeline import sensor_dtdi_pass
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise BenchSimError(f"--out = {str(out)!r}: exists and is not a folder")
+    if quick:
+        cfg = quick_config(cfg)
+    mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
+    rows = cfg.sensor.rows
+    fig3 = tuple(m for m in FIG3_STAGES if m <= rows) or (mu1, mu2)
+    stages = sorted(set(fig3) | {mu1, mu2})
+    lines = cfg.lines
+    frames = lines + max(stages) - 1
+    t_start = time.perf_counter()
+    timer = _Timer()
+    rng = np.random.default_rng(seed)
+
+    # 1-2. render every frame of the pass and stream it through the sensor and DTDI
+    t0 = time.perf_counter()
+    setup = prepare(cfg, frames, rng)
+    timer.add("render_setup", time.perf_counter() - t0)
+    t_int = setup.geom.t_int_s
+    with Progress(
+        TextColumn("[bold]render + sensor + DTDI"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} frames"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        transient=False,
+    ) as progress:
+        task = progress.add_task("pass", total=frames)
+        t0 = time.perf_counter()
+        frames_iter = _timed_frames(iter_photon_frames(setup, chunk=64), timer, progress, task)
+        stage_images = sensor_dtdi_pass(frames_iter, cfg.sensor, cfg.dtdi, t_int, stages, rng, lines=lines)
+        pass_s = time.perf_counter() - t0
+    timer.add("sensor_dtdi", max(pass_s - timer.steps.get("render_frames", 0.0), 0.0))
+    g1, g2 = stage_images[mu1], stage_images[mu2]
+
+    # 3. fusion and display transform
+    t0 = time.perf_counter()
+    fused = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta)
+    tra01 = tone_map(fused.hdr, cfg.fusion.tra, full_scale_dn=fused.full_scale_dn)
+    tra8 = quantize_display(tra01, 8)
+    timer.add("fusion", time.perf_counter() - t0)
+
+    # 4. metrics
+    t0 = time.perf_counter()
+    eq18 = evaluate_eq18(g1, g2, fused.hdr, mu1=mu1, mu2=mu2, beta=beta)
+    clip = 2**beta - 1
+    dr = measure_dynamic_range(
+        cfg.sensor, cfg.dtdi, t_int, mu1, mu2, rng, **({"n_levels": 24} if quick else {})
+    )
+    panel = setup.grid.panel
+    patches = _patch_slices(panel, setup.geom, cfg, lines)
+    right = {k: v for k, v in patches.items() if k.startswith("wedge_right")}
+    left = {k: v for k, v in patches.items() if k.startswith("wedge_left")}
+    refl = {p.name: p.reflectance for p in panel.patches}
+    darkest = min(right, key=refl.__getitem__)
+    brightest = max(left, key=refl.__getitem__)
+    images = {"gamma1": g1, "gamma2": g2, "gamma_hdr": fused.hdr}
+    snr_dark = {k: _spatial_snr(v, right[darkest]) for k, v in images.items()}
+    sat = {
+        "gamma1": float(np.mean(g1 >= clip)),
+        "gamma2": float(np.mean(g2 >= clip)),
+        "gamma_hdr": float(np.mean(fused.saturated)),
+    }
+    bsl = left[brightest]
+    bright = {
+        "patch": brightest,
+        "reflectance": refl[brightest],
+        "gamma1_mean_dn": float(g1[bsl].mean()),
+        "gamma1_fraction_of_phi_fs": float(g1[bsl].mean() / 2**beta),
+        "gamma2_saturated_fraction": float(np.mean(g2[bsl] >= clip)),
+        "gamma_hdr_saturated_fraction": float(np.mean(fused.saturated[bsl])),
+    }
+    dark = {"patch": darkest, "reflectance": refl[darkest], "snr": snr_dark}
+    # "in the noise": below SNR 2; "out of the noise": the Rose criterion, SNR >= 3
+    qualitative = {
+        "stage_mu2_saturates_bright_region": bright["gamma2_saturated_fraction"] > 0.99,
+        "stage_mu1_leaves_darkest_patch_in_noise": snr_dark["gamma1"] < SNR_IN_NOISE,
+        "hdr_keeps_bright_unsaturated": bright["gamma_hdr_saturated_fraction"] == 0.0,
+        "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
+        and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
+    }
+    eq15 = dr_increase_eq15_db(mu1, mu2)
+    pairs = stage_pairs_for_db(PAPER["delta_psi_db"], FIG3_STAGES)
+    timer.add("metrics", time.perf_counter() - t0)
+
+    # 5. outputs
+    t0 = time.perf_counter()
+    meta = provenance(cfg, seed, quick=quick, render=setup.info, backend=setup.backend.as_dict())
+    metrics: dict[str, Any] = {
+        "mu1": mu1,
+        "mu2": mu2,
+        "beta": beta,
+        "phi_fs_dn": 2**beta,
+        "lines": lines,
+        "columns": cfg.sensor.columns,
+        "rows": rows,
+        "frames": frames,
+        "stages": list(stages),
+        "delta_psi_db_eq15": eq15,
+        "paper_delta_psi_db": PAPER["delta_psi_db"],
+        "stage_pairs_26_02_db": [list(p) for p in pairs],
+        "dr_db": {("gamma_hdr" if k == "hdr" else k): v for k, v in dr["dr_db"].items()},
+        "delta_dr_db_vs_gamma1": dr["delta_db_vs_gamma1"],
+        "delta_dr_db_vs_gamma2": dr["delta_db_vs_gamma2"],
+        "dr_details": {k: v for k, v in dr.items() if k not in ("series",)},
+        "omega": {"gamma1": eq18.omega1, "gamma2": eq18.omega2, "gamma_hdr": eq18.omega_hdr},
+        "omega_paper": PAPER["omega"],
+        "histogram_variance": {  # sigma^2[rho(tau_k)] of eq. 17 before the division by M*N
+            k: v * g1.size
+            for k, v in (("gamma1", eq18.omega1), ("gamma2", eq18.omega2), ("gamma_hdr", eq18.omega_hdr))
+        },
+        "omega_binning": {
+            k: v for k, v in eq18.as_dict().items() if k in ("stage_binning", "hdr_binning", "variance")
+        },
+        "eq18_holds": eq18.holds,
+        "saturated_fraction": sat,
+        "darkest_patch": dark,
+        "brightest_patch": bright,
+        "qualitative": qualitative,
+        "seed": int(seed),
+        "config_sha256": meta["config_sha256"],
+        "version": meta["version"],
+        "engine": setup.info["engine"],
+        "variant": setup.info["variant"],
+    }
+    _write_outputs(out, cfg, metrics, meta, stage_images, fig3, fused, tra8, panel, lines)
+    timer.add("write", time.perf_counter() - t0)
+    metrics["timings_s"] = {k: round(v, 3) for k, v in timer.steps.items()}
+    metrics["wall_s"] = round(time.perf_counter() - t_start, 3)
+    from bench_sim.experiments.report import write_report
+    from bench_sim.io import write_json
+
+    write_json(out / "metrics.json", metrics)
+    write_report(out / "report.md", metrics, cfg, quick)
+    for step, s in metrics["timings_s"].items():
+        print(f"  {step:<12} {s:8.2f} s")
+    print(f"  {'total':<12} {metrics['wall_s']:8.2f} s  -> {out}")
+    return metrics
+
+
+def _write_outputs(
+    out: Path,
+    cfg: BenchConfig,
+    metrics: dict[str, Any],
+    meta: dict[str, Any],
+    stage_images: dict[int, np.ndarray],
+    fig3: tuple[int, ...],
+    fused: Any,
+    tra8: np.ndarray,
+    panel: Any,
+    lines: int,
+) -> None:
+    from bench_sim.experiments.figures import fig3_stages, fig4_hdr, stage_display
+    from bench_sim.io import atomic_path, write_exr, write_png, write_tiff16
+
+    mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
+    g1, g2 = stage_images[mu1], stage_images[mu2]
+    write_tiff16(out / "gamma1.tiff", g1, dict(meta, image=f"Gamma1, stage {mu1} [DN]"))
+    write_tiff16(out / "gamma2.tiff", g2, dict(meta, image=f"Gamma2, stage {mu2} [DN]"))
+    write_exr(
+        out / "gamma_hdr.exr",
+        {"Y": fused.hdr, "source": fused.source.astype(np.float32)},
+        dict(meta, image=f"Gamma_HDR (eq. 11) [DN, stage-{mu2} units]; source = stage used"),
+    )
+    write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})"))
+    fig3_stages(stage_images, fig3, beta, out / "fig3_stages.png", meta)
+    # dark detail: the lower (darkest) half of the wedge under the fill alone, with its surround
+    wl0, wl1, wc0, wc1 = _box(panel, cfg, "wedge", "right", lines)
+    pad = max((wc1 - wc0) // 2, 4)
+    dark_box = ((wl0 + wl1) // 2, wl1, max(wc0 - pad, 0), min(wc1 + pad, cfg.sensor.columns))
+    bright_box = _box(panel, cfg, "vbars", "left", lines)
+    fig4_hdr(
+        np.clip(fused.hdr / fused.full_scale_dn, 0, 1),
+        tra8 / 255.0,
+        stage_display(g1, beta),
+        stage_display(g2, beta),
+        dark_box,
+        bright_box,
+        out / "fig4_hdr.png",
+        meta,
+        cfg.fusion.tra,
+    )
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["image", "stage", "omega_simulated", "omega_paper", "histogram_variance_simulated"])
+    bins = metrics["omega_binning"]
+    for key, name, stage in (
+        ("gamma1", "Gamma1", mu1),
+        ("gamma2", "Gamma2", mu2),
+        ("gamma_hdr", "Gamma_HDR", f"{mu1}+{mu2}"),
+    ):
+        w.writerow(
+            [
+                name,
+                stage,
+                f"{metrics['omega'][key]:.6g}",
+                PAPER["omega"][key],
+                f"{metrics['histogram_variance'][key]:.6g}",
+            ]
+        )
+    w.writerow([])
+    w.writerow(["# binning", str(bins)])
+    w.writerow(["# seed", metrics["seed"], "config_sha256", metrics["config_sha256"]])
+    w.writerow(["# version", metrics["version"]])
+    with atomic_path(out / "table1.csv") as tmp:
+        tmp.write_text(buf.getvalue())
