@@ -216,7 +216,8 @@ class SensorConfig(_Section):
     )
     prnu: Annotated[float, Field(ge=0, le=0.5)] = 0.01
     column_offset_dn: Annotated[float, Field(ge=0)] = Field(
-        0.1, description="rms of the per-column offset of the CMOS column amplifiers [DN]"
+        0.05, description="rms of the per-column offset of the CMOS column amplifiers [DN]; it adds "
+        "up coherently over the m rows of a DTDI stage"
     )
     conversion_gain_dn_per_e: PositiveFloat = Field(
         0.072, description="K: digital numbers per electron"

@@ -43,11 +43,11 @@ PAPER = {
 SNR_IN_NOISE = 2.0
 SNR_ROSE = 3.0
 
-#: ``--quick``: the same experiment on a 256-column sensor and 256 lines (CI, first runs).
+#: ``--quick``: the same experiment on a 512-column sensor and 256 lines (CI, first runs).
 QUICK_OVERRIDES: dict[str, Any] = {
     "lines": 256,
-    "sensor": {"columns": 256},
-    "target": {"panel_lines": 256, "panel_columns": 256},
+    "sensor": {"columns": 512},
+    "target": {"panel_lines": 256, "panel_columns": 512},
     "render": {"spp": 8},
 }
 

@@ -175,7 +175,7 @@ def _layout(c: TargetConfig) -> dict[str, tuple[float, float, float, float]]:
     """Boxes (u0, u1, v0, v1) of the elements in one half panel of width ``w``."""
     H, w = float(c.panel_lines), c.panel_columns / 2.0
     return {
-        "wedge": (0.03 * H, 0.97 * H, 0.04 * w, 0.20 * w),
+        "wedge": (0.03 * H, 0.97 * H, 0.03 * w, 0.23 * w),
         "star": (0.03 * H, 0.45 * H, 0.26 * w, 0.96 * w),
         "vbars": (0.48 * H, 0.68 * H, 0.26 * w, 0.96 * w),
         "hbars": (0.70 * H, 0.85 * H, 0.26 * w, 0.96 * w),

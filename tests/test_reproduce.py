@@ -1,0 +1,94 @@
+"""``bench-sim reproduce --quick`` end to end: files, metrics, the paper's qualitative result."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from typer.testing import CliRunner
+
+from bench_sim.cli import app
+
+runner = CliRunner()
+
+FILES = (
+    "fig3_stages.png",
+    "fig4_hdr.png",
+    "gamma1.tiff",
+    "gamma2.tiff",
+    "gamma_hdr.exr",
+    "gamma_tra.png",
+    "table1.csv",
+    "metrics.json",
+    "report.md",
+)
+KEYS = (
+    "mu1", "mu2", "beta", "delta_psi_db_eq15", "stage_pairs_26_02_db", "dr_db",
+    "delta_dr_db_vs_gamma1", "delta_dr_db_vs_gamma2", "omega", "eq18_holds",
+    "saturated_fraction", "seed", "config_sha256", "version", "wall_s",
+)
+
+
+@pytest.fixture(scope="module")
+def quick_runs(tmp_path_factory):
+    outs = []
+    for name in ("a", "b"):
+        out = tmp_path_factory.mktemp(name)
+        res = runner.invoke(app, ["reproduce", "--quick", "--seed", "7", "--out", str(out)])
+        assert res.exit_code == 0, res.output
+        outs.append(out)
+    return outs
+
+
+def test_quick_writes_every_file_and_key(quick_runs):
+    out = quick_runs[0]
+    for name in FILES:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    m = json.loads((out / "metrics.json").read_text())
+    for key in KEYS:
+        assert key in m, key
+    assert set(m["dr_db"]) == set(m["omega"]) == set(m["saturated_fraction"]) == {
+        "gamma1", "gamma2", "gamma_hdr"
+    }
+    assert (m["mu1"], m["mu2"], m["beta"], m["seed"]) == (10, 80, 12, 7)
+    assert m["delta_psi_db_eq15"] == pytest.approx(20 * math.log10(8), abs=1e-9)  # 18.06 dB
+    assert m["stage_pairs_26_02_db"] == [[5, 100]]
+    report = (out / "report.md").read_text()
+    assert "18.06 dB" in report and "26.02" in report and "eq. 18" in report
+
+
+def test_quick_shows_the_papers_qualitative_result(quick_runs):
+    m = json.loads((quick_runs[0] / "metrics.json").read_text())
+    bright, dark = m["brightest_patch"], m["darkest_patch"]
+    # the scene is designed so that stage 10 puts the brightest patch near 90 % of Phi_FS ...
+    assert 0.8 < bright["gamma1_fraction_of_phi_fs"] < 1.0
+    # ... which saturates stage 80 there, while the fused image keeps it
+    assert bright["gamma2_saturated_fraction"] > 0.99
+    assert bright["gamma_hdr_saturated_fraction"] == 0.0
+    assert m["saturated_fraction"]["gamma2"] > 0.2 and m["saturated_fraction"]["gamma_hdr"] == 0.0
+    # stage 10 leaves the darkest patch in the noise, stage 80 (and the HDR image) lift it out
+    snr = dark["snr"]
+    assert snr["gamma1"] < 2.0
+    assert snr["gamma_hdr"] >= 3.0 and snr["gamma_hdr"] == pytest.approx(snr["gamma2"])
+    assert all(m["qualitative"].values())
+    # through the whole chain the DR gain over Gamma2 is eq. 15's 18.06 dB (both stages are
+    # limited by the 12-bit output word)
+    assert m["delta_dr_db_vs_gamma2"] == pytest.approx(m["delta_psi_db_eq15"], abs=0.3)
+
+
+def test_same_seed_gives_identical_metrics_except_timing(quick_runs):
+    a, b = (json.loads((o / "metrics.json").read_text()) for o in quick_runs)
+    for m in (a, b):
+        m.pop("wall_s")
+        m.pop("timings_s")
+    assert a == b
+    assert (quick_runs[0] / "table1.csv").read_text() == (quick_runs[1] / "table1.csv").read_text()
+
+
+def test_bad_out_is_one_line_and_writes_nothing(tmp_path):
+    target = tmp_path / "file"
+    target.write_text("x")
+    res = runner.invoke(app, ["reproduce", "--quick", "--out", str(target)])
+    assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1
+    assert target.read_text() == "x"
