@@ -21,6 +21,7 @@ test: setup
 bench: setup
 	$(PY) benchmarks/bench_render.py
 	$(PY) benchmarks/bench_sensor.py
+	$(PY) benchmarks/bench_fusion.py
 
 clean:
 	rm -rf $(VENV) .setup-stamp

@@ -135,11 +135,14 @@ def fuse(
     beta: Annotated[int, typer.Option("--beta", help="output word bits: Phi_FS = 2**beta")] = 12,
     out: Annotated[Path, typer.Option("--out", help="HDR output (.exr)")] = Path("hdr.exr"),
     tra: Annotated[Path | None, typer.Option("--tra", help="also write Gamma_TRA (.png)")] = None,
+    tra_method: Annotated[
+        str, typer.Option("--tra-method", help="log | gamma | histeq | reinhard | drago | mantiuk")
+    ] = "log",
 ) -> None:
     """Fuse two stage images with the paper's rule (eq. 11)."""
     from bench_sim.experiments.fuse_files import fuse_files
 
-    fuse_files(low, high, mu1=mu1, mu2=mu2, beta=beta, out=out, tra=tra)
+    fuse_files(low, high, mu1=mu1, mu2=mu2, beta=beta, out=out, tra=tra, tra_method=tra_method)
 
 
 @app.command()

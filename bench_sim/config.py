@@ -37,6 +37,7 @@ __all__ = [
     "DEFAULT_CONFIG_PATH",
     "load_config",
     "config_from_dict",
+    "with_overrides",
     "config_to_toml_dict",
     "config_sha256",
 ]
@@ -411,6 +412,11 @@ def load_config(path: str | Path | None = None) -> BenchConfig:
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     p = p.resolve()
     return config_from_dict(_read_toml(p), source=str(p))
+
+
+def with_overrides(cfg: BenchConfig, overrides: dict[str, Any], source: str = "<overrides>") -> BenchConfig:
+    """A copy of ``cfg`` with the (nested) keys of ``overrides`` replaced, validated again."""
+    return config_from_dict(_deep_merge(config_to_toml_dict(cfg), overrides), source=source)
 
 
 def config_to_toml_dict(cfg: BenchConfig) -> dict[str, Any]:

@@ -15,16 +15,12 @@ import time
 
 import numpy as np
 
-from bench_sim.config import config_from_dict, config_to_toml_dict, load_config
+from bench_sim.config import load_config, with_overrides
 from bench_sim.render.exposures import iter_photon_frames, prepare
 
 
 def _cfg(**over):
-    d = config_to_toml_dict(load_config())
-    d["sensor"].update(rows=100, columns=1024)
-    for k, v in over.items():
-        d[k].update(v)
-    return config_from_dict(d)
+    return with_overrides(load_config(), {"sensor": {"rows": 100, "columns": 1024}, **over})
 
 
 def _frames(cfg, engine, k0, n, seed):

@@ -2,27 +2,16 @@
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
 import pytest
 
-from bench_sim.config import BenchConfig, config_from_dict, config_to_toml_dict, load_config
-
-
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = _merge(out[k], v)
-        else:
-            out[k] = v
-    return out
+from bench_sim.config import BenchConfig, load_config, with_overrides
 
 
 def make_cfg(**sections: Any) -> BenchConfig:
     """The default rig with sections overridden, e.g. ``make_cfg(sensor={"rows": 8})``."""
-    return config_from_dict(_merge(config_to_toml_dict(load_config()), sections))
+    return with_overrides(load_config(), sections)
 
 
 TINY = {
@@ -35,7 +24,7 @@ TINY = {
 
 def tiny_cfg(**sections: Any) -> BenchConfig:
     """A 12 x 48 sensor on the default rig (spot edge and wedges in view), overridable."""
-    return make_cfg(**_merge(TINY, sections))
+    return with_overrides(with_overrides(load_config(), TINY), sections)
 
 
 @pytest.fixture

@@ -12,7 +12,6 @@ Outputs (``results/paper`` by default): ``fig3_stages.png``, ``fig4_hdr.png``, `
 
 from __future__ import annotations
 
-import copy
 import csv
 import io
 import math
@@ -23,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from bench_sim.config import BenchConfig, config_from_dict, config_to_toml_dict
+from bench_sim.config import BenchConfig, with_overrides
 from bench_sim.errors import BenchSimError
 from bench_sim.experiments.provenance import provenance
 
@@ -52,16 +51,9 @@ QUICK_OVERRIDES: dict[str, Any] = {
 }
 
 
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
 def quick_config(cfg: BenchConfig) -> BenchConfig:
     """The ``--quick`` preset of a config (:data:`QUICK_OVERRIDES`)."""
-    return config_from_dict(_merge(config_to_toml_dict(cfg), QUICK_OVERRIDES), source="--quick preset")
+    return with_overrides(cfg, QUICK_OVERRIDES, source="--quick preset")
 
 
 class _Timer:
@@ -297,10 +289,10 @@ def _write_outputs(
     )
     write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})"))
     fig3_stages(stage_images, fig3, beta, out / "fig3_stages.png", meta)
-    # dark detail: the lower (darkest) half of the wedge under the fill alone, with its surround
+    # dark detail: the lower (darkest) half of the wedge under the fill alone
     wl0, wl1, wc0, wc1 = _box(panel, cfg, "wedge", "right", lines)
-    pad = max((wc1 - wc0) // 2, 4)
-    dark_box = ((wl0 + wl1) // 2, wl1, max(wc0 - pad, 0), min(wc1 + pad, cfg.sensor.columns))
+    inset = max((wc1 - wc0) // 10, 1)
+    dark_box = ((wl0 + wl1) // 2, wl1, wc0 + inset, wc1 - inset)
     bright_box = _box(panel, cfg, "vbars", "left", lines)
     fig4_hdr(
         np.clip(fused.hdr / fused.full_scale_dn, 0, 1),

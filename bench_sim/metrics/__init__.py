@@ -1,1 +1,10 @@
-"""metrics stage."""
+"""Metrics stage: dynamic range, SNR and the paper's histogram coefficient.
+
+* :mod:`bench_sim.metrics.dynamic_range` - eq. 15 (``20 lg(mu2/mu1)``) and the stage pairs that
+  give a requested value.
+* :mod:`bench_sim.metrics.histogram` - eq. 16-18: ``omega = var(histogram) / (M N)`` with a
+  documented binning, and the evaluation of eq. 18.
+* :mod:`bench_sim.metrics.snr` - SNR versus signal from image pairs (series or uniform patches).
+* :mod:`bench_sim.metrics.emva1288` - EMVA 1288 R4 photon-transfer analysis (K, QE, saturation,
+  ``mu_p.min``, measured dynamic range).
+"""

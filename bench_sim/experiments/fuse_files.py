@@ -1,0 +1,252 @@
+"""Fuse two stage images from files with the paper's rule (eq. 11): ``bench-sim fuse``.
+
+Inputs: two single-channel stage images of the same shape, 16-bit (or 8-bit) TIFF/PNG, EXR or
+NPY (read by :func:`bench_sim.io.read_image`). They must hold **integer** DN values in
+``0 .. 2**beta - 1``: a stage image is the sum of integer pixel reads, clipped to the ``beta``-bit
+output word (paper eq. 1-4); a fractional value means the file is not a stage image in DN (for
+example a 0..1 normalised EXR) and eq. 11's threshold would be meaningless, so it is refused.
+
+Outputs, written only after every check has passed (atomic writes; if the second file cannot be
+written the first is removed again):
+
+* ``out`` (``.exr``): channel ``Y`` = ``Gamma_HDR`` [DN, stage-``mu2`` units, float32; exact for
+  values below ``2**24``], channel ``source`` = the stage (``mu1`` or ``mu2``) each pixel came
+  from; header attribute ``bench_sim`` (JSON): inputs (path, SHA-256, shape), ``mu1``, ``mu2``,
+  ``beta``, ``Phi_FS``, the eq. 11 threshold, full scale, counts, units and the package version.
+* ``tra`` (``.png``, optional): ``Gamma_TRA``, 8-bit, transform ``tra_method`` (default
+  ``"log"``, see :mod:`bench_sim.fusion.tonemap`) over the HDR full scale
+  ``(mu2/mu1) * (2**beta - 1)``; metadata in a text chunk.
+
+Every problem raises :class:`~bench_sim.errors.BenchSimError` with one line naming the file or
+option, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench_sim import __version__
+from bench_sim.errors import BenchSimError
+from bench_sim.fusion.common import BETA_MAX, BETA_MIN
+from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
+from bench_sim.fusion.tonemap import TRA_METHODS, gamma_tra
+from bench_sim.io import read_image, write_exr, write_png
+
+__all__ = ["fuse_files", "check_stage_image"]
+
+_TRA_FORMULAS = {
+    "log": "y = ln(1 + max(x, 0)) / ln(1 + X)",
+    "gamma": "y = clip(x / X, 0, 1) ** (1 / 2.2)",
+    "histeq": "y = (C(x) - C(x_min)) / (P - C(x_min)), C = cumulative pixel count",
+    "reinhard": "OpenCV TonemapReinhard(gamma=2.2) of max(x / X, 0.5 / X)",
+    "drago": "OpenCV TonemapDrago(gamma=2.2) of max(x / X, 0.5 / X)",
+    "mantiuk": "OpenCV TonemapMantiuk(gamma=2.2) of max(x / X, 0.5 / X)",
+}
+
+
+def _where(arr: np.ndarray, mask: np.ndarray) -> tuple[float, str]:
+    idx = tuple(int(i) for i in np.argwhere(mask)[0])
+    return float(arr[idx]), f"(row {idx[0]}, column {idx[1]})"
+
+
+def check_stage_image(arr: np.ndarray, name: str, beta: int) -> None:
+    """Refuse a stage image that is empty, non-finite, fractional or outside ``0 .. 2**beta - 1``.
+
+    Parameters
+    ----------
+    arr
+        2-D image [DN] as read by :func:`bench_sim.io.read_image`.
+    name
+        How to name it in the message (the file).
+    beta
+        Output word length [bits].
+    """
+    top = 2**beta - 1
+    allowed = f"allowed: integers 0..{top} (2**beta - 1 with --beta {beta})"
+    if arr.size == 0:
+        raise BenchSimError(f"{name}: empty image (shape {arr.shape})")
+    finite = np.isfinite(arr)
+    if not finite.all():
+        v, at = _where(arr, ~finite)
+        raise BenchSimError(f"{name}: value {v} at {at} is not a finite number; {allowed}")
+    frac = arr != np.floor(arr)
+    if frac.any():
+        v, at = _where(arr, frac)
+        raise BenchSimError(
+            f"{name}: value {v:g} at {at} is not an integer; a stage image holds integer DN "
+            f"(sums of pixel reads), not normalised values; {allowed}"
+        )
+    if arr.min() < 0:
+        v, at = _where(arr, arr < 0)
+        raise BenchSimError(f"{name}: value {v:g} at {at} is negative; {allowed}")
+    if arr.max() > top:
+        v, at = _where(arr, arr > top)
+        raise BenchSimError(f"{name}: value {v:g} at {at} exceeds 2**beta - 1 = {top}; {allowed}")
+
+
+def _check_int(name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise BenchSimError(f"{name} = {value!r}: must be an integer")
+    return int(value)
+
+
+def _check_out(path: Path, option: str, suffix: str) -> None:
+    if path.suffix.lower() != suffix:
+        got = path.suffix or "no suffix"
+        raise BenchSimError(f"{option} = {path}: must be a {suffix} file (got '{got}')")
+    if path.is_dir():
+        raise BenchSimError(f"{option} = {path}: is a directory; give a {suffix} file name")
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise BenchSimError(f"{option} = {path}: {parent} is not a directory")
+
+
+def _read_quietly(path: Path) -> np.ndarray:
+    """:func:`read_image` with tifffile's logged warnings held back (a broken TIFF is reported
+    by the one-line error; the logger would add a second line on stderr)."""
+    log = logging.getLogger("tifffile")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        return read_image(path)
+    finally:
+        log.setLevel(level)
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def fuse_files(
+    low: str | os.PathLike[str],
+    high: str | os.PathLike[str],
+    *,
+    mu1: int,
+    mu2: int,
+    beta: int,
+    out: str | os.PathLike[str],
+    tra: str | os.PathLike[str] | None = None,
+    tra_method: str = "log",
+) -> dict[str, Any]:
+    """Read two stage images, fuse them with eq. 11, write the HDR EXR (and ``Gamma_TRA`` PNG).
+
+    Parameters
+    ----------
+    low
+        Stage-``mu1`` image file (``Gamma1``).
+    high
+        Stage-``mu2`` image file (``Gamma2``), same shape.
+    mu1, mu2
+        Stages, ``1 <= mu1 < mu2``.
+    beta
+        Output word length of the inputs [bits], ``1 .. 32``; ``Phi_FS = 2**beta`` (eq. 4).
+    out
+        HDR output, ``.exr``.
+    tra
+        Optional display output, ``.png`` (8-bit).
+    tra_method
+        Display transform, one of ``log, gamma, histeq, reinhard, drago, mantiuk``.
+
+    Returns
+    -------
+    dict
+        The metadata written to the EXR header plus the output paths.
+
+    Raises
+    ------
+    BenchSimError
+        Any bad option or input (one line); nothing is written then.
+    """
+    low_p, high_p, out_p = Path(low), Path(high), Path(out)
+    tra_p = Path(tra) if tra is not None else None
+    beta = _check_int("--beta", beta)
+    if not BETA_MIN <= beta <= BETA_MAX:
+        raise BenchSimError(f"--beta = {beta}: output word bits must lie in {BETA_MIN}..{BETA_MAX}")
+    mu1 = _check_int("--mu1", mu1)
+    mu2 = _check_int("--mu2", mu2)
+    if mu1 < 1:
+        raise BenchSimError(f"--mu1 = {mu1}: must be a DTDI stage >= 1")
+    if mu1 >= mu2:
+        raise BenchSimError(f"--mu1 = {mu1}, --mu2 = {mu2}: need mu1 < mu2 (1 <= mu1 < mu2)")
+    if tra_method not in TRA_METHODS:
+        raise BenchSimError(f"tra method = {tra_method!r}: allowed {', '.join(TRA_METHODS)}")
+    _check_out(out_p, "--out", ".exr")
+    inputs = {low_p.resolve(), high_p.resolve()}
+    if out_p.resolve() in inputs:
+        raise BenchSimError(f"--out = {out_p}: is one of the input files; choose another name")
+    if tra_p is not None:
+        _check_out(tra_p, "--tra", ".png")
+        if tra_p.resolve() in inputs:
+            raise BenchSimError(f"--tra = {tra_p}: is one of the input files; choose another name")
+        if tra_p.resolve() == out_p.resolve():
+            raise BenchSimError(f"--tra = {tra_p}: same file as --out")
+
+    g1 = _read_quietly(low_p)
+    g2 = _read_quietly(high_p)
+    check_stage_image(g1, f"{low_p} (LOW, stage mu1 = {mu1})", beta)
+    check_stage_image(g2, f"{high_p} (HIGH, stage mu2 = {mu2})", beta)
+    if g1.shape != g2.shape:
+        raise BenchSimError(
+            f"{high_p}: shape {g2.shape} differs from {low_p} shape {g1.shape}; the two stage "
+            "images must be the same size"
+        )
+
+    result = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta)
+    display = gamma_tra(result.hdr, tra_method, full_scale_dn=result.full_scale_dn) if tra_p else None
+    meta: dict[str, Any] = {
+        "kind": "Gamma_HDR",
+        "method": "paper eq. 11 (fuse_dtdi_hdr_eq11)",
+        "bench_sim_version": __version__,
+        "inputs": {
+            "low": {"path": str(low_p), "sha256": _sha256(low_p), "shape": list(g1.shape)},
+            "high": {"path": str(high_p), "sha256": _sha256(high_p), "shape": list(g2.shape)},
+        },
+        "mu1": mu1,
+        "mu2": mu2,
+        "beta": beta,
+        "phi_fs_dn": 2**beta,
+        "threshold_dn": eq11_threshold_dn(mu1, mu2, beta),
+        "full_scale_dn": result.full_scale_dn,
+        "units": f"DN in stage-mu2 (= {mu2}) units",
+        "channels": {
+            "Y": "Gamma_HDR [DN, stage-mu2 units]",
+            "source": f"stage the pixel came from: {mu2} = gamma2 (eq. 10), {mu1} = (mu2/mu1)*gamma1 (eq. 8)",
+        },
+        "pixels_from_low": int(np.count_nonzero(result.source == mu1)),
+        "pixels_saturated": int(np.count_nonzero(result.saturated)),
+    }
+    write_exr(out_p, {"Y": result.hdr, "source": result.source.astype(np.float32)}, meta)
+    if tra_p is not None and display is not None:
+        tra_meta = {
+            "kind": "Gamma_TRA",
+            "tra": tra_method,
+            "formula": _TRA_FORMULAS[tra_method],
+            "x": "Gamma_HDR [DN]",
+            "X_full_scale_dn": result.full_scale_dn,
+            "bits": 8,
+            "hdr": str(out_p),
+            "mu1": mu1,
+            "mu2": mu2,
+            "beta": beta,
+            "bench_sim_version": __version__,
+        }
+        try:
+            write_png(tra_p, display, tra_meta)
+        except BaseException:
+            with contextlib.suppress(FileNotFoundError):
+                out_p.unlink()
+            raise
+    return {**meta, "out": str(out_p), "tra": str(tra_p) if tra_p else None}

@@ -1,0 +1,608 @@
+"""EMVA 1288 (Release 4) photon-transfer analysis: pure functions over measured series.
+
+Definitions follow EMVA 1288 Release 4.0 (linear cameras):
+
+* temporal mean and variance of a level from **two** images ``A, B`` of ``N`` pixels:
+  ``mu_y = (mean(A) + mean(B)) / 2`` and
+  ``sigma_y**2 = mean(((A - mean(A)) - (B - mean(B)))**2) / 2`` (fixed patterns cancel in the
+  difference image, the factor 1/2 undoes the doubling of the variance);
+* dark subtraction: ``mu_y - mu_y.dark``, ``sigma_y**2 - sigma_y.dark**2``;
+* overall system gain ``K`` [DN/e-]: slope of the photon-transfer line
+  ``sigma_y**2 - sigma_y.dark**2 = K (mu_y - mu_y.dark)`` (linear model, eq. 7), fitted through
+  the origin over the points from 0 to 70 % of the saturation signal;
+* responsivity ``R = eta K`` [DN/photon]: slope of ``mu_y - mu_y.dark`` versus ``mu_p`` over the
+  same range; quantum efficiency ``eta = R / K``;
+* dark temporal noise ``sigma_y.dark`` [DN] and, in electrons,
+  ``sigma_d = sqrt(sigma_y.dark**2 - sigma_q**2) / K``;
+* saturation point: the irradiation where the temporal variance is at its maximum; its signal
+  ``mu_y.sat`` (dark subtracted) gives the saturation capacity ``mu_e.sat = mu_y.sat / K``;
+* ``SNR = (mu_y - mu_y.dark) / sigma_y``;
+* absolute sensitivity threshold ``mu_p.min``: the irradiation where SNR = 1; measured
+  (interpolated on the SNR curve) and from the linear model,
+  ``mu_p.min = (sqrt(sigma_y.dark**2 / K**2 + 1/4) + 1/2) / eta`` (solution of
+  ``eta mu_p = sqrt(sigma_d**2 + sigma_q**2/K**2 + eta mu_p)``);
+* dynamic range ``DR = mu_p.sat / mu_p.min``, in dB ``20 lg DR``.
+
+:func:`dynamic_range_from_series` needs only photons, mean signal and temporal noise, so it
+serves any image type: a DTDI stage, or a fused HDR image whose gain is not a single ``K``.
+The saturation point is located between the levels (parabolic refinement of the variance
+maximum) so that dynamic ranges can be compared to a few tenths of a dB even on a coarse grid.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from bench_sim.errors import BenchSimError
+
+__all__ = [
+    "SaturationMethod",
+    "SaturationPoint",
+    "DynamicRange",
+    "PhotonTransferResult",
+    "mean_var_from_pair",
+    "series_from_pairs",
+    "fit_conversion_gain",
+    "fit_responsivity",
+    "dark_temporal_noise_e",
+    "saturation_point",
+    "snr_curve",
+    "photons_at_snr",
+    "photons_min_model",
+    "dynamic_range_db",
+    "dynamic_range_from_series",
+    "analyse_photon_transfer",
+    "stack_mean_var",
+    "spatial_nonuniformity",
+    "LINEAR_FIT_FRACTION",
+]
+
+SaturationMethod = Literal["max_variance", "interpolated", "extrapolated"]
+
+#: Upper end of the linear range used for the K and responsivity fits, as a fraction of the
+#: saturation signal (EMVA 1288 R4: 0 .. 70 %).
+LINEAR_FIT_FRACTION = 0.7
+
+
+def _as1d(name: str, a: np.ndarray | list[float], n: int | None = None) -> np.ndarray:
+    arr = np.asarray(a, dtype=np.float64).ravel()
+    if n is not None and arr.size != n:
+        raise BenchSimError(f"{name}: expected {n} values, got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        raise BenchSimError(f"{name}: values must be finite")
+    return arr
+
+
+def mean_var_from_pair(image_a: np.ndarray, image_b: np.ndarray) -> tuple[float, float]:
+    """Temporal mean and variance of one level from two images (EMVA 1288 R4).
+
+    Parameters
+    ----------
+    image_a, image_b
+        Two images of the same level, same shape [DN].
+
+    Returns
+    -------
+    (mu_y, sigma_y2)
+        ``mu_y = (<A> + <B>) / 2`` [DN] and
+        ``sigma_y**2 = <((A - <A>) - (B - <B>))**2> / 2`` [DN^2].
+    """
+    a = np.asarray(image_a, dtype=np.float64)
+    b = np.asarray(image_b, dtype=np.float64)
+    if a.shape != b.shape or a.size < 2:
+        raise BenchSimError(f"image pair shapes {a.shape} and {b.shape}: must be equal, >= 2 pixels")
+    ma, mb = float(a.mean()), float(b.mean())
+    diff = (a - ma) - (b - mb)
+    return 0.5 * (ma + mb), 0.5 * float(np.mean(diff * diff))
+
+
+def series_from_pairs(pairs: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Mean [DN] and temporal variance [DN^2] of each level of a series of image pairs."""
+    mv = np.array([mean_var_from_pair(a, b) for a, b in pairs], dtype=np.float64).reshape(-1, 2)
+    return mv[:, 0], mv[:, 1]
+
+
+def _fit_through_origin(x: np.ndarray, y: np.ndarray) -> float:
+    den = float(np.sum(x * x))
+    if den <= 0:
+        raise BenchSimError("linear fit: no points with signal in the linear range")
+    return float(np.sum(x * y) / den)
+
+
+def _linear_mask(signal: np.ndarray, saturation_signal: float, fraction: float) -> np.ndarray:
+    mask = (signal > 0) & (signal <= fraction * saturation_signal)
+    if int(mask.sum()) < 2:
+        raise BenchSimError(
+            f"linear fit: fewer than 2 levels between 0 and {fraction:.0%} of the saturation "
+            f"signal {saturation_signal:.6g} (add light levels)"
+        )
+    return mask
+
+
+def fit_conversion_gain(
+    mean_dn: np.ndarray,
+    var_dn: np.ndarray,
+    dark_mean_dn: float,
+    dark_var_dn: float,
+    saturation_signal_dn: float,
+    fraction: float = LINEAR_FIT_FRACTION,
+) -> float:
+    """Overall system gain ``K`` [DN/e-] from the photon-transfer curve (EMVA 1288 R4, eq. 7).
+
+    Least-squares slope through the origin of ``sigma_y**2 - sigma_y.dark**2`` versus
+    ``mu_y - mu_y.dark`` over the levels with ``0 < mu_y - mu_y.dark <= fraction * mu_y.sat``.
+
+    Parameters
+    ----------
+    mean_dn, var_dn
+        Temporal mean [DN] and variance [DN^2] of the bright levels.
+    dark_mean_dn, dark_var_dn
+        The same for the dark level.
+    saturation_signal_dn
+        Dark-subtracted saturation signal ``mu_y.sat`` [DN].
+    fraction
+        Upper end of the fit range (EMVA: 0.7).
+    """
+    mean = _as1d("mean_dn", mean_dn)
+    var = _as1d("var_dn", var_dn, mean.size)
+    x = mean - dark_mean_dn
+    y = var - dark_var_dn
+    mask = _linear_mask(x, saturation_signal_dn, fraction)
+    return _fit_through_origin(x[mask], y[mask])
+
+
+def fit_responsivity(
+    photons: np.ndarray,
+    mean_dn: np.ndarray,
+    dark_mean_dn: float,
+    saturation_signal_dn: float,
+    fraction: float = LINEAR_FIT_FRACTION,
+) -> float:
+    """Responsivity ``R = eta * K`` [DN/photon] (EMVA 1288 R4, eq. 5): slope through the origin
+    of ``mu_y - mu_y.dark`` versus ``mu_p`` over ``0 .. fraction * mu_y.sat``."""
+    p = _as1d("photons", photons)
+    x = _as1d("mean_dn", mean_dn, p.size) - dark_mean_dn
+    mask = _linear_mask(x, saturation_signal_dn, fraction)
+    return _fit_through_origin(p[mask], x[mask])
+
+
+def dark_temporal_noise_e(dark_var_dn: float, k_dn_per_e: float, quantization_var_dn2: float) -> float:
+    """Dark temporal noise in electrons: ``sigma_d = sqrt(sigma_y.dark**2 - sigma_q**2) / K``.
+
+    ``quantization_var_dn2`` is ``1/12`` for one quantised value, ``m/12`` for a DTDI stage that
+    sums ``m`` independently quantised rows. Clamped at 0.
+    """
+    if k_dn_per_e <= 0:
+        raise BenchSimError(f"K = {k_dn_per_e!r}: must be > 0")
+    return math.sqrt(max(float(dark_var_dn) - float(quantization_var_dn2), 0.0)) / float(k_dn_per_e)
+
+
+@dataclass(frozen=True)
+class SaturationPoint:
+    """Where a series saturates.
+
+    Attributes
+    ----------
+    photons
+        Irradiation at saturation ``mu_p.sat`` (the series' photon unit).
+    signal
+        Dark-subtracted mean signal there ``mu_y.sat``.
+    index
+        Level (grid index) with the largest temporal variance.
+    method
+        ``max_variance``, ``interpolated`` or ``extrapolated``.
+    """
+
+    photons: float
+    signal: float
+    index: int
+    method: str
+
+
+def _parabola_vertex(x: np.ndarray, y: np.ndarray) -> float:
+    """x of the vertex of the parabola through three points (unevenly spaced allowed)."""
+    x0, x1, x2 = (float(v) for v in x)
+    y0, y1, y2 = (float(v) for v in y)
+    den = (x0 - x1) * (x0 - x2) * (x1 - x2)
+    a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / den
+    b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / den
+    if a >= 0:  # not a maximum: keep the grid point
+        return x1
+    return -b / (2 * a)
+
+
+def saturation_point(
+    photons: np.ndarray,
+    signal: np.ndarray,
+    temporal_var: np.ndarray,
+    method: SaturationMethod = "interpolated",
+    *,
+    responsivity: float | None = None,
+) -> SaturationPoint:
+    """Saturation point of a series (EMVA 1288 R4: the maximum of the temporal variance).
+
+    Parameters
+    ----------
+    photons
+        Irradiation of each level (e.g. mean photons per pixel), increasing.
+    signal
+        Dark-subtracted mean signal of each level.
+    temporal_var
+        Temporal variance of each level.
+    method
+        ``"max_variance"``: the level with the largest variance (EMVA's definition, quantised to
+        the level grid). ``"interpolated"``: the vertex of the parabola through that level and
+        its two neighbours (clamped to the neighbours); the signal there is interpolated
+        linearly. Its accuracy is a fraction of the level spacing where the peak is resolved;
+        a hard clip collapses the variance within a few per cent of irradiation, so sample
+        the levels at about 1 % spacing near saturation for 0.1 dB. ``"extrapolated"``: the
+        irradiation at which the linear response reaches the clipped plateau,
+        ``mu_p.sat = max(mu_y) / R`` with ``max(mu_y)`` the largest (dark-subtracted) mean
+        signal of the series at or beyond the variance maximum and ``R`` the responsivity
+        (``responsivity``, or a fit over 0..70 % of the saturation signal). It does not depend
+        on the level grid (only on the fit and the plateau) but lies a few per cent above the
+        variance maximum, where noise and fixed-pattern spread start to clip.
+    responsivity
+        Slope of signal versus photons for ``"extrapolated"`` (fitted when None).
+
+    Raises
+    ------
+    BenchSimError
+        Fewer than 3 levels, or the variance peaks at the last level (series not saturated).
+    """
+    p = _as1d("photons", photons)
+    s = _as1d("signal", signal, p.size)
+    v = _as1d("temporal_var", temporal_var, p.size)
+    if p.size < 3:
+        raise BenchSimError(f"saturation: need at least 3 levels, got {p.size}")
+    if np.any(np.diff(p) <= 0):
+        raise BenchSimError("saturation: photons must increase strictly from level to level")
+    i = int(np.argmax(v))
+    if i == p.size - 1:
+        raise BenchSimError(
+            f"saturation: the variance peaks at the brightest level (photons {p[-1]:.6g}); the "
+            "series does not reach saturation (add brighter levels)"
+        )
+    if method == "max_variance":
+        return SaturationPoint(float(p[i]), float(s[i]), i, method)
+    if method not in ("interpolated", "extrapolated"):
+        raise BenchSimError(
+            f"saturation method = {method!r}: allowed 'max_variance', 'interpolated', 'extrapolated'"
+        )
+    if i == 0:
+        p_sat, s_sat = float(p[0]), float(s[0])
+    else:
+        sl = slice(i - 1, i + 2)
+        p_sat = min(max(_parabola_vertex(p[sl], v[sl]), float(p[i - 1])), float(p[i + 1]))
+        s_sat = float(np.interp(p_sat, p[sl], s[sl]))
+    if method == "interpolated":
+        return SaturationPoint(p_sat, s_sat, i, method)
+    r = responsivity
+    if r is None:
+        mask = _linear_mask(s, s_sat, LINEAR_FIT_FRACTION)
+        r = _fit_through_origin(p[mask], s[mask])
+    if r <= 0:
+        raise BenchSimError(f"saturation: responsivity {r!r} must be > 0")
+    plateau = float(np.max(s[i:]))
+    return SaturationPoint(plateau / r, plateau, i, method)
+
+
+def snr_curve(signal: np.ndarray, temporal_std: np.ndarray) -> np.ndarray:
+    """``SNR = (mu_y - mu_y.dark) / sigma_y`` (EMVA 1288 R4); ``inf`` where ``sigma_y = 0``."""
+    s = np.asarray(signal, dtype=np.float64)
+    sd = np.asarray(temporal_std, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.where(sd > 0, s / np.where(sd > 0, sd, 1.0), np.inf)
+    return out
+
+
+def photons_at_snr(photons: np.ndarray, snr: np.ndarray, target: float = 1.0) -> float:
+    """Irradiation where the measured SNR curve first reaches ``target`` (interpolated).
+
+    Between the last level below ``target`` and the first at or above it, the crossing is
+    interpolated on log(photons)-log(SNR) (a power law, exact for the shot- and
+    read-noise-limited parts of the curve), or linearly when a bracketing value is <= 0 (e.g.
+    the dark level, photons = 0).
+
+    Raises
+    ------
+    BenchSimError
+        The SNR never reaches ``target``, or already exceeds it at the darkest level.
+    """
+    p = _as1d("photons", photons)
+    q = np.asarray(snr, dtype=np.float64).ravel()
+    if q.size != p.size:
+        raise BenchSimError(f"snr: expected {p.size} values, got {q.size}")
+    above = np.nonzero(q >= target)[0]
+    if above.size == 0:
+        raise BenchSimError(f"SNR never reaches {target:g} in the series (max {np.nanmax(q):.3g})")
+    i = int(above[0])
+    if i == 0:
+        raise BenchSimError(
+            f"SNR is already {q[0]:.3g} >= {target:g} at the darkest level (photons {p[0]:.6g}); "
+            "add darker levels"
+        )
+    p0, p1, q0, q1 = p[i - 1], p[i], q[i - 1], q[i]
+    if p0 > 0 and q0 > 0 and np.isfinite(q1):
+        t = (math.log(target) - math.log(q0)) / (math.log(q1) - math.log(q0))
+        return float(math.exp(math.log(p0) + t * (math.log(p1) - math.log(p0))))
+    if not np.isfinite(q1):
+        return float(p1)
+    t = (target - q0) / (q1 - q0)
+    return float(p0 + t * (p1 - p0))
+
+
+def photons_min_model(eta: float, k_dn_per_e: float, dark_var_dn: float) -> float:
+    """Absolute sensitivity threshold from the linear model (SNR = 1) [photons].
+
+    ``mu_p.min = (sqrt(sigma_y.dark**2 / K**2 + 1/4) + 1/2) / eta`` (EMVA 1288 R4): the
+    solution of ``eta mu_p = sqrt(sigma_y.dark**2 / K**2 + eta mu_p)``.
+    """
+    if eta <= 0 or k_dn_per_e <= 0:
+        raise BenchSimError(f"eta = {eta!r}, K = {k_dn_per_e!r}: must be > 0")
+    return (math.sqrt(dark_var_dn / k_dn_per_e**2 + 0.25) + 0.5) / eta
+
+
+def dynamic_range_db(photons_sat: float, photons_min: float) -> float:
+    """``DR = 20 lg(mu_p.sat / mu_p.min)`` [dB] (EMVA 1288 R4)."""
+    if photons_sat <= 0 or photons_min <= 0:
+        raise BenchSimError(
+            f"dynamic range: mu_p.sat = {photons_sat!r} and mu_p.min = {photons_min!r} must be > 0"
+        )
+    return 20.0 * math.log10(photons_sat / photons_min)
+
+
+@dataclass(frozen=True)
+class DynamicRange:
+    """Dynamic range of an image type from a photon-transfer series.
+
+    Attributes
+    ----------
+    photons_sat, photons_min
+        ``mu_p.sat`` and ``mu_p.min`` (SNR = 1, measured) in the series' photon unit.
+    signal_sat
+        Dark-subtracted signal at saturation.
+    dr_ratio, dr_db
+        ``mu_p.sat / mu_p.min`` and ``20 lg`` of it.
+    saturation
+        The :class:`SaturationPoint` used.
+    snr
+        SNR of every level (dark subtracted signal over temporal noise).
+    """
+
+    photons_sat: float
+    photons_min: float
+    signal_sat: float
+    dr_ratio: float
+    dr_db: float
+    saturation: SaturationPoint
+    snr: np.ndarray = field(repr=False)
+
+
+def dynamic_range_from_series(
+    photons: np.ndarray,
+    mean_signal: np.ndarray,
+    temporal_std: np.ndarray,
+    *,
+    dark_signal: float = 0.0,
+    saturation: SaturationMethod = "interpolated",
+    responsivity: float | None = None,
+) -> DynamicRange:
+    """Dynamic range (EMVA 1288 R4 definition) of any image type from a measured series.
+
+    Works on DTDI stage images and on fused HDR images alike: it uses only the irradiation,
+    the mean signal and the temporal noise of each level, not a conversion gain.
+
+    Parameters
+    ----------
+    photons
+        Irradiation of each level, strictly increasing (e.g. mean photons per pixel per frame,
+        or summed over the frames of a stage: the ratio is unit-free). A dark level
+        (photons = 0) may be included.
+    mean_signal
+        Mean signal of each level (any unit, e.g. DN or stage-``mu2`` DN).
+    temporal_std
+        Temporal noise of each level, same unit (e.g. ``sqrt`` of :func:`mean_var_from_pair`).
+    dark_signal
+        Mean dark signal subtracted from ``mean_signal``.
+    saturation
+        Saturation method (see :func:`saturation_point`); default ``"interpolated"``, located
+        between grid levels.
+    responsivity
+        For ``saturation="extrapolated"``: slope of the dark-subtracted signal versus photons
+        (fitted over 0..70 % of saturation when None).
+
+    Returns
+    -------
+    DynamicRange
+        ``mu_p.sat``, ``mu_p.min`` (SNR = 1, interpolated on the measured SNR curve below
+        saturation), ``DR`` as a ratio and in dB.
+    """
+    p = _as1d("photons", photons)
+    sig = _as1d("mean_signal", mean_signal, p.size) - float(dark_signal)
+    sd = _as1d("temporal_std", temporal_std, p.size)
+    if np.any(sd < 0):
+        raise BenchSimError("temporal_std: must be >= 0")
+    sat = saturation_point(p, sig, sd * sd, saturation, responsivity=responsivity)
+    snr = snr_curve(sig, sd)
+    below = slice(0, sat.index + 1)
+    p_min = photons_at_snr(p[below], snr[below], 1.0)
+    return DynamicRange(
+        photons_sat=sat.photons,
+        photons_min=p_min,
+        signal_sat=sat.signal,
+        dr_ratio=sat.photons / p_min,
+        dr_db=dynamic_range_db(sat.photons, p_min),
+        saturation=sat,
+        snr=snr,
+    )
+
+
+@dataclass(frozen=True)
+class PhotonTransferResult:
+    """EMVA 1288 results of one image type (a camera, or one DTDI stage).
+
+    Units: DN, electrons (e-) and photons of the series (for a DTDI stage: photons summed over
+    the ``m`` frames of the stage).
+    """
+
+    k_dn_per_e: float
+    responsivity_dn_per_photon: float
+    quantum_efficiency: float
+    dark_mean_dn: float
+    dark_temporal_noise_dn: float
+    dark_temporal_noise_e: float
+    saturation_signal_dn: float
+    saturation_capacity_e: float
+    photons_sat: float
+    photons_min: float
+    photons_min_model: float
+    dr_db: float
+    dr_db_model: float
+    snr_max: float
+    saturation: SaturationPoint
+    snr: np.ndarray = field(repr=False)
+
+    def summary(self) -> dict[str, float | int | str]:
+        """The scalar results as a JSON-friendly dict."""
+        return {
+            "K_dn_per_e": self.k_dn_per_e,
+            "responsivity_dn_per_photon": self.responsivity_dn_per_photon,
+            "quantum_efficiency": self.quantum_efficiency,
+            "dark_mean_dn": self.dark_mean_dn,
+            "dark_temporal_noise_dn": self.dark_temporal_noise_dn,
+            "dark_temporal_noise_e": self.dark_temporal_noise_e,
+            "saturation_signal_dn": self.saturation_signal_dn,
+            "saturation_capacity_e": self.saturation_capacity_e,
+            "photons_sat": self.photons_sat,
+            "photons_min": self.photons_min,
+            "photons_min_model": self.photons_min_model,
+            "dynamic_range_db": self.dr_db,
+            "dynamic_range_db_model": self.dr_db_model,
+            "snr_max": self.snr_max,
+            "saturation_method": self.saturation.method,
+            "saturation_level_index": self.saturation.index,
+        }
+
+
+def analyse_photon_transfer(
+    photons: np.ndarray,
+    mean_dn: np.ndarray,
+    var_dn: np.ndarray,
+    dark_mean_dn: float,
+    dark_var_dn: float,
+    *,
+    quantization_var_dn2: float = 1.0 / 12.0,
+    saturation: SaturationMethod = "interpolated",
+    fraction: float = LINEAR_FIT_FRACTION,
+) -> PhotonTransferResult:
+    """Full EMVA 1288 analysis of one series of bright levels plus its dark level.
+
+    Parameters
+    ----------
+    photons
+        Irradiation ``mu_p`` of each bright level [photons per pixel], strictly increasing.
+    mean_dn, var_dn
+        Temporal mean [DN] and variance [DN^2] of each bright level (:func:`mean_var_from_pair`).
+    dark_mean_dn, dark_var_dn
+        The same for the dark level.
+    quantization_var_dn2
+        ``sigma_q**2`` removed from the dark variance for ``sigma_d`` (``m/12`` for stage ``m``).
+    saturation
+        Saturation method (:func:`saturation_point`).
+    fraction
+        Upper end of the linear fit range as a fraction of the saturation signal.
+    """
+    p = _as1d("photons", photons)
+    mean = _as1d("mean_dn", mean_dn, p.size)
+    var = _as1d("var_dn", var_dn, p.size)
+    signal = mean - float(dark_mean_dn)
+    sat = saturation_point(p, signal, var, "interpolated")
+    k = fit_conversion_gain(mean, var, dark_mean_dn, dark_var_dn, sat.signal, fraction)
+    r = fit_responsivity(p, mean, dark_mean_dn, sat.signal, fraction)
+    if k <= 0 or r <= 0:
+        raise BenchSimError(f"photon transfer: fitted K = {k:.4g}, R = {r:.4g} must be > 0")
+    eta = r / k
+    if saturation != "interpolated":
+        sat = saturation_point(p, signal, var, saturation, responsivity=r)
+    # the dark level (photons 0, SNR 0) brackets SNR = 1 if the darkest bright level exceeds it
+    dr = dynamic_range_from_series(
+        np.concatenate([[0.0], p]),
+        np.concatenate([[float(dark_mean_dn)], mean]),
+        np.sqrt(np.maximum(np.concatenate([[float(dark_var_dn)], var]), 0.0)),
+        dark_signal=dark_mean_dn, saturation=saturation, responsivity=r,
+    )
+    p_min_model = photons_min_model(eta, k, dark_var_dn)
+    snr = dr.snr[1:]
+    finite = snr[: sat.index + 1]
+    return PhotonTransferResult(
+        k_dn_per_e=k,
+        responsivity_dn_per_photon=r,
+        quantum_efficiency=eta,
+        dark_mean_dn=float(dark_mean_dn),
+        dark_temporal_noise_dn=math.sqrt(max(float(dark_var_dn), 0.0)),
+        dark_temporal_noise_e=dark_temporal_noise_e(dark_var_dn, k, quantization_var_dn2),
+        saturation_signal_dn=sat.signal,
+        saturation_capacity_e=sat.signal / k,
+        photons_sat=sat.photons,
+        photons_min=dr.photons_min,
+        photons_min_model=p_min_model,
+        dr_db=dr.dr_db,
+        dr_db_model=dynamic_range_db(sat.photons, p_min_model),
+        snr_max=float(np.max(finite)),
+        saturation=sat,
+        snr=snr,
+    )
+
+
+def stack_mean_var(stack: np.ndarray) -> tuple[float, float, float]:
+    """Mean, spatial variance and temporal variance of a stack of ``L`` images (EMVA 1288 R4).
+
+    The spatial variance is that of the average image ``<y> = (1/L) sum_l y_l`` over the pixels,
+    less the residual temporal variance ``sigma_y**2 / L`` it still holds; ``sigma_y**2`` is the
+    pixel-wise variance over the stack, averaged over the pixels.
+
+    Parameters
+    ----------
+    stack
+        (L, H, W) images of one level, ``L >= 2`` [DN].
+
+    Returns
+    -------
+    (mu_y, s_y2, sigma_y2)
+        Mean [DN], spatial variance [DN^2] (clamped at 0), temporal variance [DN^2].
+    """
+    y = np.asarray(stack, dtype=np.float64)
+    if y.ndim != 3 or y.shape[0] < 2:
+        raise BenchSimError(f"image stack shape {y.shape}: expected (L >= 2, height, width)")
+    n_img = y.shape[0]
+    avg = y.mean(axis=0)
+    temporal = float(np.mean(y.var(axis=0, ddof=1)))
+    spatial = float(avg.var()) - temporal / n_img
+    return float(avg.mean()), max(spatial, 0.0), temporal
+
+
+def spatial_nonuniformity(
+    bright_stack: np.ndarray, dark_stack: np.ndarray, k_dn_per_e: float
+) -> dict[str, float]:
+    """DSNU and PRNU (EMVA 1288 R4 definitions) from a bright and a dark stack.
+
+    ``DSNU = s_y.dark / K`` [e-] and ``PRNU = sqrt(s_y**2 - s_y.dark**2) / (mu_y - mu_y.dark)``
+    (a fraction), with ``s`` the spatial standard deviations of :func:`stack_mean_var`; the
+    bright stack is taken at about 50 % of saturation.
+    """
+    mu_b, s2_b, _ = stack_mean_var(bright_stack)
+    mu_d, s2_d, _ = stack_mean_var(dark_stack)
+    if k_dn_per_e <= 0 or mu_b <= mu_d:
+        raise BenchSimError("spatial nonuniformity: need K > 0 and a bright mean above the dark mean")
+    return {
+        "dark_spatial_std_dn": math.sqrt(s2_d),
+        "bright_spatial_std_dn": math.sqrt(s2_b),
+        "dsnu_e": math.sqrt(s2_d) / k_dn_per_e,
+        "prnu": math.sqrt(max(s2_b - s2_d, 0.0)) / (mu_b - mu_d),
+        "bright_signal_dn": mu_b - mu_d,
+    }

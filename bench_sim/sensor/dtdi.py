@@ -1,0 +1,412 @@
+"""Digital time-delay integration (DTDI): raw pixel frames -> stage images, all stages in one pass.
+
+Indexing (0-based, as in the code): frames ``k = 0 .. K-1``, sensor rows ``i = 0 .. M-1``.
+Row ``i`` in frame ``k`` sees scene line ``j = k - i`` (the image moves one row per line period).
+The stage-``m`` value of line ``j`` sums the ``m`` rows that saw it (paper eq. 1-2, with the
+paper's 1-based ``i`` shifted to 0-based)::
+
+    gamma_m[j, n] = sum_{i = 0 .. m-1} v[frame j + i, row i, column n]
+
+Which lines come out
+--------------------
+Stage ``m`` of line ``j`` is complete after frame ``j + m - 1``. A pass of ``K`` frames
+therefore yields the *complete* lines ``j = 0 .. K - m`` (``K - m + 1`` lines) of stage ``m``:
+
+* lines ``j < 0`` (scene lines that were already under rows ``i > 0`` when the pass started)
+  never get their first rows and are dropped;
+* lines ``j > K - m`` (still under the sensor when the pass ends) are partial and dropped.
+
+No partial sum is ever output. To get the same ``L`` lines ``0 .. L-1`` for every requested
+stage (what fusion needs: the stage images must be line-aligned), a pass needs
+``K = L + max(stages) - 1`` frames; a ``reproduce`` run of ``L`` lines with ``M`` sensor rows
+uses ``K = L + M - 1`` frames, which covers every stage ``1 .. M``. Pass ``lines=L`` to
+:func:`dtdi_direct` / :func:`run_dtdi` to get exactly lines ``0 .. L-1`` for every stage.
+
+Output word
+-----------
+The stored stage value is an integer word of ``beta_bits`` bits: ``Phi_FS = 2**beta``
+(paper eq. 4) and the value is clipped to ``0 .. 2**beta - 1``::
+
+    gamma = clip(rint(sum_i (v_i - b) + pedestal), 0, 2**beta - 1)     (subtract_black=True)
+    gamma = clip(rint(sum_i v_i + pedestal), 0, 2**beta - 1)           (subtract_black=False)
+
+with ``b`` the black offset [DN]: subtracted from every row before the sum (so it does not
+accumulate), or left in, in which case stage ``m`` carries ``m * b``. Rounding only matters for
+non-integer input (the sensor's ``quantization`` switched off) or a non-integer black offset.
+``pedestal`` (default 0; one value, or one per stage) is a constant added after the sum; the
+photon-transfer measurement uses it to keep the dark signal above 0 (EMVA 1288 requires an
+unclipped dark signal). The sum is
+formed in float64, exact for integer DN (``2**53`` is far above any sum of 16-bit rows), so the
+order of summation does not matter and the streaming and direct forms agree bit for bit.
+
+Noise: every row is read (and its read noise and quantisation noise added) independently, so
+unlike charge-domain TDI the temporal dark noise of stage ``m`` grows as ``sqrt(m)``. Fixed
+patterns of a column (the column amplifier offset, and the PRNU/DSNU of the ``m`` summed pixels)
+are the same for every line, so they add coherently (the column offset as ``m`` times).
+
+Memory: :class:`DTDIAccumulator` keeps a ring of ``max(stages)`` partial line sums of ``N``
+columns, ``O(M * N)``, independent of the number of lines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+from bench_sim.config import SensorConfig
+from bench_sim.errors import BenchSimError
+from bench_sim.sensor.emva import QUANTIZATION_VAR_DN2, pixel_mean_var_dn
+
+__all__ = [
+    "DTDIAccumulator",
+    "dtdi_direct",
+    "run_dtdi",
+    "full_scale_dn",
+    "complete_lines",
+    "frames_needed",
+    "validate_stages",
+    "stage_pedestals",
+    "stage_mean_var_dn",
+]
+
+
+def full_scale_dn(beta_bits: int) -> int:
+    """``Phi_FS = 2**beta`` [DN] (paper eq. 4); the largest stored value is ``Phi_FS - 1``."""
+    return 1 << int(beta_bits)
+
+
+def complete_lines(n_frames: int, stage: int) -> int:
+    """Number of complete lines of stage ``m`` in a pass of ``K`` frames: ``max(K - m + 1, 0)``."""
+    return max(int(n_frames) - int(stage) + 1, 0)
+
+
+def frames_needed(n_lines: int, stages: Iterable[int]) -> int:
+    """Frames a pass needs for lines ``0 .. L-1`` of every stage: ``L + max(stages) - 1``."""
+    return int(n_lines) + max(int(m) for m in stages) - 1
+
+
+def validate_stages(stages: Iterable[int], rows: int | None = None) -> tuple[int, ...]:
+    """Sorted unique stages; each an integer in ``1 .. rows``. Raises :class:`BenchSimError`."""
+    try:
+        out = sorted({int(m) for m in stages})
+    except (TypeError, ValueError):
+        raise BenchSimError(f"stages = {stages!r}: must be integers >= 1") from None
+    if not out:
+        raise BenchSimError("stages: at least one stage is needed")
+    if out[0] < 1 or (rows is not None and out[-1] > rows):
+        top = rows if rows is not None else "rows"
+        raise BenchSimError(f"stages = {out}: each stage must lie in 1..{top}")
+    return tuple(out)
+
+
+Pedestal = float | Mapping[int, float]
+
+
+def stage_pedestals(pedestal_dn: Pedestal, stages: Sequence[int]) -> dict[int, float]:
+    """The pedestal [DN] of every stage: one value for all, or a stage -> value mapping."""
+    if isinstance(pedestal_dn, Mapping):
+        missing = [m for m in stages if m not in pedestal_dn]
+        if missing:
+            raise BenchSimError(f"pedestal_dn: no value for stages {missing}")
+        out = {m: float(pedestal_dn[m]) for m in stages}
+    else:
+        out = {m: float(pedestal_dn) for m in stages}
+    bad = {m: v for m, v in out.items() if not np.isfinite(v)}
+    if bad:
+        raise BenchSimError(f"pedestal_dn = {bad}: must be finite")
+    return out
+
+
+def _check_beta(beta_bits: int) -> int:
+    beta = int(beta_bits)
+    if not 1 <= beta <= 32:
+        raise BenchSimError(f"beta_bits = {beta_bits!r}: must lie in 1..32")
+    return beta
+
+
+def _finish(
+    sums: np.ndarray, stage: int, beta_bits: int, black_offset_dn: float, subtract_black: bool,
+    pedestal_dn: float,
+) -> np.ndarray:
+    """Raw row sums -> stored words: subtract m*b, add the pedestal, round, clip (eq. 4)."""
+    shift = float(pedestal_dn) - (stage * float(black_offset_dn) if subtract_black else 0.0)
+    val = sums + shift if shift != 0.0 else sums.copy()
+    np.rint(val, out=val)
+    np.clip(val, 0.0, float(full_scale_dn(beta_bits) - 1), out=val)
+    return val.astype(np.uint32)
+
+
+def dtdi_direct(
+    frames_dn: np.ndarray,
+    stages: Sequence[int],
+    beta_bits: int,
+    black_offset_dn: float,
+    subtract_black: bool = True,
+    *,
+    pedestal_dn: Pedestal = 0.0,
+    lines: int | None = None,
+) -> dict[int, np.ndarray]:
+    """Reference DTDI straight from paper eq. 1-2 (the whole pass in memory).
+
+    ``gamma_m[j] = sum_{i=0}^{m-1} v[j + i, i]`` for the complete lines ``j = 0 .. K - m``.
+
+    Parameters
+    ----------
+    frames_dn
+        (K, M, N) raw pixel values [DN] (frame, sensor row, column).
+    stages
+        Requested stages ``m`` (each in ``1 .. M``).
+    beta_bits
+        Output word size ``beta``: values clipped to ``0 .. 2**beta - 1`` (eq. 4).
+    black_offset_dn
+        Black offset ``b`` [DN] of the raw values.
+    subtract_black
+        Subtract ``b`` from every row before summing (else stage ``m`` carries ``m * b``).
+    pedestal_dn
+        Constant added to every stage value after the sum [DN]: one value, or stage -> value.
+    lines
+        ``None``: every stage gets all its complete lines (``K - m + 1``). An integer ``L``: every
+        stage gets lines ``0 .. L-1`` (needs ``K >= L + max(stages) - 1``).
+
+    Returns
+    -------
+    dict
+        Stage ``m`` -> (lines, N) ``uint32`` stage image, row ``j`` = scene line ``j``.
+    """
+    v = np.asarray(frames_dn)
+    if v.ndim != 3:
+        raise BenchSimError(f"frames_dn shape {v.shape}: expected (frames, rows, columns)")
+    n_frames, rows, _ = v.shape
+    beta = _check_beta(beta_bits)
+    st = validate_stages(stages, rows)
+    if lines is not None and n_frames < frames_needed(lines, st):
+        raise BenchSimError(
+            f"lines = {lines}: a pass of {n_frames} frames gives only "
+            f"{complete_lines(n_frames, st[-1])} complete lines of stage {st[-1]} "
+            f"(needs {frames_needed(lines, st)} frames)"
+        )
+    ped = stage_pedestals(pedestal_dn, st)
+    out: dict[int, np.ndarray] = {}
+    for m in st:
+        n_lines = complete_lines(n_frames, m) if lines is None else int(lines)
+        sums = np.zeros((n_lines, v.shape[2]), dtype=np.float64)
+        for i in range(m):  # eq. 1-2: row i of frame j + i, for every line j at once
+            sums += v[i : i + n_lines, i, :]
+        out[m] = _finish(sums, m, beta, black_offset_dn, subtract_black, ped[m])
+    return out
+
+
+class DTDIAccumulator:
+    """Streaming DTDI: push frames one by one (or in chunks), get stage lines as they complete.
+
+    Keeps a ring of ``R = max(stages)`` partial sums, one per scene line under the used rows,
+    so its memory is ``O(R * N)`` whatever the number of lines. After frame ``k`` (0-based) is
+    pushed, the line ``j = k - m + 1`` of every requested stage ``m`` is complete (if ``j >= 0``)
+    and is returned; so stage ``m`` produces lines ``0, 1, 2, ...`` in order, one per frame, from
+    frame ``m - 1`` on. Partial lines (see the module docstring) are never returned.
+
+    Parameters
+    ----------
+    n_columns
+        Columns ``N`` of the frames.
+    stages
+        Requested stages (each ``>= 1``); frames need at least ``max(stages)`` rows (extra rows
+        are ignored).
+    beta_bits, black_offset_dn, subtract_black, pedestal_dn
+        As in :func:`dtdi_direct`.
+    """
+
+    def __init__(
+        self,
+        n_columns: int,
+        stages: Sequence[int],
+        beta_bits: int,
+        black_offset_dn: float,
+        subtract_black: bool = True,
+        *,
+        pedestal_dn: Pedestal = 0.0,
+    ) -> None:
+        if int(n_columns) < 1:
+            raise BenchSimError(f"n_columns = {n_columns!r}: must be >= 1")
+        self.n_columns = int(n_columns)
+        self.stages = validate_stages(stages)
+        self.beta_bits = _check_beta(beta_bits)
+        self.black_offset_dn = float(black_offset_dn)
+        self.subtract_black = bool(subtract_black)
+        self.pedestal_dn = stage_pedestals(pedestal_dn, self.stages)
+        self.ring_rows = self.stages[-1]
+        self._ring = np.zeros((self.ring_rows, self.n_columns), dtype=np.float64)
+        self.frames_seen = 0
+
+    def reset(self) -> None:
+        """Forget every partial line (start a new pass)."""
+        self._ring.fill(0.0)
+        self.frames_seen = 0
+
+    def lines_emitted(self, stage: int) -> int:
+        """Lines of ``stage`` returned so far (the index of its next line)."""
+        return complete_lines(self.frames_seen, stage)
+
+    def _add(self, frame: np.ndarray) -> None:
+        """Add row ``i`` of frame ``k`` to the partial sum of line ``k - i`` (ring slot mod R)."""
+        r_rows = self.ring_rows
+        r = self.frames_seen % r_rows
+        # slots r, r-1, ..., 0 take rows 0..r; slots R-1, ..., r+1 take rows r+1..R-1
+        self._ring[r::-1] += frame[: r + 1]
+        if r + 1 < r_rows:
+            self._ring[r_rows - 1 : r : -1] += frame[r + 1 : r_rows]
+
+    def push(self, frame_dn: np.ndarray) -> dict[int, np.ndarray]:
+        """Add one (M, N) frame of raw pixel values [DN].
+
+        Returns
+        -------
+        dict
+            Stage ``m`` -> its next complete line, a (N,) ``uint32`` array (scene line
+            ``lines_emitted(m) - 1`` after the call), for the stages that completed one.
+        """
+        f = np.asarray(frame_dn)
+        if f.ndim != 2 or f.shape[1] != self.n_columns or f.shape[0] < self.ring_rows:
+            raise BenchSimError(
+                f"frame shape {f.shape}: expected (rows >= {self.ring_rows}, {self.n_columns})"
+            )
+        self._add(f)
+        k = self.frames_seen
+        out: dict[int, np.ndarray] = {}
+        for m in self.stages:
+            j = k - m + 1
+            if j >= 0:
+                slot = j % self.ring_rows
+                out[m] = _finish(
+                    self._ring[slot], m, self.beta_bits, self.black_offset_dn, self.subtract_black,
+                    self.pedestal_dn[m],
+                )
+        # the line that just left the last used row (partial lines j < 0 included): free its slot
+        self._ring[(k - self.ring_rows + 1) % self.ring_rows] = 0.0
+        self.frames_seen = k + 1
+        return out
+
+    def push_many(self, frames_dn: np.ndarray) -> dict[int, np.ndarray]:
+        """Add a (C, M, N) chunk of frames; return stage -> (lines completed, N) ``uint32``.
+
+        Stage ``m``'s block holds its lines ``lines_emitted(m) - n .. lines_emitted(m) - 1``
+        (in order); a stage that completed no line gets a (0, N) array.
+        """
+        chunk = np.asarray(frames_dn)
+        if chunk.ndim == 2:
+            chunk = chunk[None]
+        if chunk.ndim != 3:
+            raise BenchSimError(f"frames shape {chunk.shape}: expected (frames, rows, columns)")
+        got: dict[int, list[np.ndarray]] = {m: [] for m in self.stages}
+        for f in chunk:
+            for m, line in self.push(f).items():
+                got[m].append(line)
+        return {
+            m: (np.stack(v) if v else np.zeros((0, self.n_columns), dtype=np.uint32))
+            for m, v in got.items()
+        }
+
+
+def _iter_chunks(frames: np.ndarray | Iterable[np.ndarray]) -> Iterator[np.ndarray]:
+    if isinstance(frames, np.ndarray):
+        if frames.ndim != 3:
+            raise BenchSimError(f"frames shape {frames.shape}: expected (frames, rows, columns)")
+        yield frames
+        return
+    for item in frames:
+        arr = np.asarray(item)
+        yield arr[None] if arr.ndim == 2 else arr
+
+
+def run_dtdi(
+    frames: np.ndarray | Iterable[np.ndarray],
+    stages: Sequence[int],
+    beta_bits: int,
+    black_offset_dn: float,
+    subtract_black: bool = True,
+    *,
+    pedestal_dn: Pedestal = 0.0,
+    lines: int | None = None,
+) -> dict[int, np.ndarray]:
+    """Run a whole pass through :class:`DTDIAccumulator` (streaming, one pass, all stages).
+
+    Parameters
+    ----------
+    frames
+        A (K, M, N) array, or an iterable of (M, N) frames and/or (C, M, N) chunks in frame order.
+    stages, beta_bits, black_offset_dn, subtract_black, pedestal_dn, lines
+        As in :func:`dtdi_direct`; the result is identical to :func:`dtdi_direct` on the
+        stacked frames.
+
+    Returns
+    -------
+    dict
+        Stage ``m`` -> (lines, N) ``uint32`` stage image.
+    """
+    st = validate_stages(stages)
+    acc: DTDIAccumulator | None = None
+    blocks: dict[int, list[np.ndarray]] = {m: [] for m in st}
+    kept = {m: 0 for m in st}
+    for chunk in _iter_chunks(frames):
+        if chunk.ndim != 3:
+            raise BenchSimError(f"frame chunk shape {chunk.shape}: expected (rows, columns) frames")
+        if acc is None:
+            acc = DTDIAccumulator(
+                chunk.shape[2], st, beta_bits, black_offset_dn, subtract_black, pedestal_dn=pedestal_dn
+            )
+        for m, block in acc.push_many(chunk).items():
+            if lines is not None:
+                block = block[: max(int(lines) - kept[m], 0)]
+            if len(block):
+                blocks[m].append(block)
+                kept[m] += len(block)
+    if acc is None:
+        raise BenchSimError("frames: the pass has no frames")
+    if lines is not None and min(kept.values()) < int(lines):
+        raise BenchSimError(
+            f"lines = {lines}: a pass of {acc.frames_seen} frames gives only "
+            f"{complete_lines(acc.frames_seen, st[-1])} complete lines of stage {st[-1]} "
+            f"(needs {frames_needed(int(lines), st)} frames)"
+        )
+    return {
+        m: (np.concatenate(b) if b else np.zeros((0, acc.n_columns), dtype=np.uint32))
+        for m, b in blocks.items()
+    }
+
+
+def stage_mean_var_dn(
+    photons: np.ndarray | float,
+    sensor: SensorConfig,
+    t_int_s: float,
+    stage: int,
+    *,
+    subtract_black: bool = True,
+    pedestal_dn: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form mean [DN] and temporal variance [DN^2] of a stage-``m`` value (linear range).
+
+    The stage sums ``m`` independent pixel reads of the same scene line (eq. 1-2), each with
+    the EMVA linear model of :func:`bench_sim.sensor.emva.pixel_mean_var_dn`:
+    ``mean = m * (mu_y - b * subtract_black) + pedestal`` and ``var = m * sigma_y**2``; without
+    the sensor's quantisation the output word still rounds once (``+ 1/12``).
+    Valid below pixel and word saturation and above 0 DN; fixed patterns averaged out.
+
+    Parameters
+    ----------
+    photons
+        Mean photons per pixel per frame ``mu_p`` (scalar or array).
+    sensor
+        Pixel model.
+    t_int_s
+        Integration time of one frame [s].
+    stage
+        ``m``.
+    subtract_black, pedestal_dn
+        As in :func:`dtdi_direct`.
+    """
+    mean_px, var_px = pixel_mean_var_dn(photons, sensor, t_int_s)
+    m = int(stage)
+    mean = m * (mean_px - (sensor.black_offset_dn if subtract_black else 0.0)) + float(pedestal_dn)
+    var = m * var_px + (0.0 if sensor.quantization else QUANTIZATION_VAR_DN2)
+    return mean, var

@@ -1,0 +1,178 @@
+"""Sensor + DTDI in one streaming pass: photons per pixel per frame -> stage images.
+
+This is the hand-off used by the experiments: frames of mean photons (from the renderer, or a
+uniform field for the photon-transfer measurement) go through the EMVA 1288 pixel model
+(:func:`bench_sim.sensor.emva.expose`) in chunks of frames and straight into the streaming
+:class:`bench_sim.sensor.dtdi.DTDIAccumulator`; only the output stage images grow with the
+number of lines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+from bench_sim.config import DTDIConfig, SensorConfig
+from bench_sim.errors import BenchSimError
+from bench_sim.sensor.dtdi import DTDIAccumulator, frames_needed, validate_stages
+from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, expose
+
+__all__ = ["sensor_dtdi_pass", "iter_sensor_dtdi", "DEFAULT_CHUNK_FRAMES"]
+
+#: Frames exposed per vectorised call. The temporal noise drawn depends on this chunking (the
+#: frames are re-chunked to it whatever the input's own chunking), so keep it fixed for
+#: reproducible runs.
+DEFAULT_CHUNK_FRAMES = 16
+
+
+def _rechunk(frames: np.ndarray | Iterable[np.ndarray], size: int) -> Iterator[np.ndarray]:
+    """Yield (C, M, N) float64 chunks of exactly ``size`` frames (the last may be shorter)."""
+    if isinstance(frames, np.ndarray):
+        if frames.ndim != 3:
+            raise BenchSimError(f"photons shape {frames.shape}: expected (frames, rows, columns)")
+        for start in range(0, frames.shape[0], size):
+            yield np.asarray(frames[start : start + size], dtype=np.float64)
+        return
+    buf: list[np.ndarray] = []
+    n = 0
+    for item in frames:
+        arr = np.asarray(item, dtype=np.float64)
+        if arr.ndim == 2:
+            arr = arr[None]
+        if arr.ndim != 3:
+            raise BenchSimError(f"photon frame shape {arr.shape}: expected (rows, columns)")
+        buf.append(arr)
+        n += arr.shape[0]
+        while n >= size:
+            joined = np.concatenate(buf) if len(buf) > 1 else buf[0]
+            yield joined[:size]
+            rest = joined[size:]
+            buf = [rest] if len(rest) else []
+            n = len(rest)
+    if n:
+        yield np.concatenate(buf) if len(buf) > 1 else buf[0]
+
+
+def iter_sensor_dtdi(
+    photons: np.ndarray | Iterable[np.ndarray],
+    sensor: SensorConfig,
+    dtdi: DTDIConfig,
+    t_int_s: float,
+    stages: Sequence[int],
+    rng: np.random.Generator,
+    *,
+    fixed: FixedPattern | None = None,
+    pedestal_dn: float | Mapping[int, float] = 0.0,
+    chunk_frames: int = DEFAULT_CHUNK_FRAMES,
+) -> Iterator[dict[int, np.ndarray]]:
+    """Stream a pass: expose each chunk of frames and yield the stage lines it completed.
+
+    Memory stays ``O(chunk_frames * R * C)`` for the frames plus the accumulator's ring,
+    whatever the number of lines, as long as the caller does not keep the yielded lines.
+    Arguments as in :func:`sensor_dtdi_pass`.
+
+    Yields
+    ------
+    dict
+        Per chunk: stage ``m`` -> (n, C) ``uint32`` block of its next complete lines (in line
+        order, continuing from the previous block; n may be 0).
+    """
+    if chunk_frames < 1:
+        raise BenchSimError(f"chunk_frames = {chunk_frames!r}: must be >= 1")
+    st = validate_stages(stages)
+    if fixed is None:
+        fixed = draw_fixed_pattern(sensor, rng)
+    acc: DTDIAccumulator | None = None
+    fp = fixed
+    for chunk in _rechunk(photons, chunk_frames):
+        if acc is None:
+            rows, cols = chunk.shape[1:]
+            if rows > fixed.shape[0] or cols > fixed.shape[1]:
+                raise BenchSimError(
+                    f"photon frames of {rows} x {cols} pixels exceed the sensor's "
+                    f"{fixed.shape[0]} x {fixed.shape[1]}"
+                )
+            validate_stages(st, rows)
+            fp = fixed if (rows, cols) == fixed.shape else fixed.window(rows, cols)
+            acc = DTDIAccumulator(
+                cols, st, dtdi.beta_bits, sensor.black_offset_dn, dtdi.subtract_black,
+                pedestal_dn=pedestal_dn,
+            )
+        yield acc.push_many(expose(chunk, sensor, fp, t_int_s, rng))
+    if acc is None:
+        raise BenchSimError("photons: the pass has no frames")
+
+
+def sensor_dtdi_pass(
+    photons: np.ndarray | Iterable[np.ndarray],
+    sensor: SensorConfig,
+    dtdi: DTDIConfig,
+    t_int_s: float,
+    stages: Sequence[int],
+    rng: np.random.Generator,
+    *,
+    fixed: FixedPattern | None = None,
+    lines: int | None = None,
+    pedestal_dn: float | Mapping[int, float] = 0.0,
+    chunk_frames: int = DEFAULT_CHUNK_FRAMES,
+) -> dict[int, np.ndarray]:
+    """Expose frames of photons and accumulate every requested DTDI stage in one pass.
+
+    Parameters
+    ----------
+    photons
+        Mean photons per pixel per frame: a (K, R, C) array or an iterable of (R, C) frames
+        and/or (c, R, C) chunks in frame order. ``R <= sensor.rows`` and ``C <= sensor.columns``:
+        the frames cover the top-left ``R x C`` pixels of the sensor (a region of interest;
+        rows beyond ``max(stages)`` add nothing to any stage).
+    sensor, dtdi
+        Pixel model and DTDI settings (``beta_bits``, ``subtract_black``).
+    t_int_s
+        Integration time of one frame [s].
+    stages
+        Requested stages, each in ``1 .. R``.
+    rng
+        The run's random generator. If ``fixed`` is None the fixed pattern is drawn from it
+        first (:func:`draw_fixed_pattern` for the whole sensor), then the temporal noise.
+    fixed
+        The sensor's fixed pattern (whole sensor or exactly ``R x C``).
+    lines
+        ``None``: each stage gets all its complete lines (``K - m + 1``); ``L``: lines
+        ``0 .. L-1`` for every stage (needs ``K >= L + max(stages) - 1`` frames).
+    pedestal_dn
+        Constant added to every stage value [DN], one value or stage -> value (see
+        :mod:`bench_sim.sensor.dtdi`).
+    chunk_frames
+        Frames per vectorised :func:`expose` call. The temporal noise drawn depends on it
+        (frames are re-chunked to it whatever the input's chunking): keep it fixed.
+
+    Returns
+    -------
+    dict
+        Stage ``m`` -> (lines, C) ``uint32`` stage image (paper eq. 1-2, 4).
+    """
+    st = validate_stages(stages)
+    blocks: dict[int, list[np.ndarray]] = {m: [] for m in st}
+    kept = {m: 0 for m in st}
+    cols = 0
+    for got in iter_sensor_dtdi(
+        photons, sensor, dtdi, t_int_s, st, rng, fixed=fixed, pedestal_dn=pedestal_dn,
+        chunk_frames=chunk_frames,
+    ):
+        for m, block in got.items():
+            cols = block.shape[1]
+            if lines is not None:
+                block = block[: max(int(lines) - kept[m], 0)]
+            if len(block):
+                blocks[m].append(block)
+                kept[m] += len(block)
+    if lines is not None and min(kept.values()) < int(lines):
+        raise BenchSimError(
+            f"lines = {lines}: the pass gives only {kept[st[-1]]} complete lines of stage "
+            f"{st[-1]} (needs {frames_needed(int(lines), st)} frames)"
+        )
+    return {
+        m: (np.concatenate(b) if b else np.zeros((0, cols), dtype=np.uint32))
+        for m, b in blocks.items()
+    }

@@ -1,0 +1,193 @@
+"""Photon-transfer experiment: K and dark noise recovered, EMVA files, determinism, CLI, errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tifffile
+from typer.testing import CliRunner
+
+import bench_sim
+from bench_sim.cli import app
+from bench_sim.config import BenchConfig, config_from_dict, config_sha256
+from bench_sim.errors import BenchSimError
+from bench_sim.experiments.ptc import run_ptc
+
+SMALL = {
+    "sensor": {"rows": 16, "columns": 128},
+    "fusion": {"mu1": 2, "mu2": 8},
+}
+TOML = """
+[sensor]
+rows = 16
+columns = 64
+[fusion]
+mu1 = 2
+mu2 = 8
+"""
+
+
+def small_cfg(**sections: dict) -> BenchConfig:
+    data = {k: dict(v) for k, v in SMALL.items()}
+    for k, v in sections.items():
+        data.setdefault(k, {}).update(v)
+    return config_from_dict(data)
+
+
+def parse_descriptor(path: Path) -> dict:
+    """Minimal reader of the EMVA 1288 descriptor format (the reference package's rules)."""
+    out: dict = {"bright": [], "dark": []}
+    cur: list | None = None
+    for raw in path.read_text().splitlines():
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        tok = line.split()
+        if tok[0] == "n":
+            out["bits"], out["width"], out["height"] = (int(t) for t in tok[1:4])
+        elif tok[0] == "b":
+            cur = []
+            out["bright"].append((float(tok[1]), float(tok[2]), cur))
+        elif tok[0] == "d":
+            cur = []
+            out["dark"].append((float(tok[1]), cur))
+        elif tok[0] == "i":
+            assert cur is not None
+            cur.append(path.parent / tok[1])
+        elif tok[0] != "v":
+            raise AssertionError(f"unknown line {line!r}")
+    return out
+
+
+@pytest.fixture(scope="module")
+def ptc_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, BenchConfig]:
+    cfg = small_cfg()
+    out = tmp_path_factory.mktemp("ptc")
+    res = run_ptc(cfg, stages=[1, 4, 16], seed=5, out=out, lines=64, columns=128)
+    return out, res, cfg
+
+
+def test_ptc_recovers_gain_and_dark_noise_within_3_percent(ptc_run) -> None:
+    """Must show 6: K and the dark temporal noise (e- per stage: sqrt(m) x the pixel's
+    sqrt(read^2 + dark)) from the photon-transfer analysis of the stage images."""
+    _, res, cfg = ptc_run
+    s = cfg.sensor
+    sigma_px = np.sqrt(s.read_noise_e**2 + s.dark_current_e_s * cfg.timing.t_int_s)
+    for m in (1, 4, 16):
+        r = res["results"][str(m)]
+        meas = r["measured"]
+        assert abs(meas["K_dn_per_e"] / s.conversion_gain_dn_per_e - 1) < 0.03, (m, meas)
+        assert abs(meas["dark_temporal_noise_e"] / (np.sqrt(m) * sigma_px) - 1) < 0.03, (m, meas)
+        assert abs(r["relative_error"]["dark_temporal_noise_dn"]) < 0.03
+        assert abs(meas["quantum_efficiency"] / s.quantum_efficiency - 1) < 0.03
+        # saturation: full well (stage 1) or the output word (stages 4, 16), a few % below the clip
+        ratio = r["per_frame"]["photons_sat"] / r["expected"]["saturation_photons_per_frame"]
+        assert 0.88 < ratio <= 1.0, (m, ratio)
+        # SNR = 1 measured on the curve agrees with the linear model
+        assert meas["photons_min"] == pytest.approx(meas["photons_min_model"], rel=0.05)
+
+
+def test_ptc_files_follow_the_emva_descriptor_format(ptc_run) -> None:
+    out, res, cfg = ptc_run
+    assert res["levels"] >= 31 and res["bench_sim_version"] == bench_sim.__version__
+    assert res["config_sha256"] == config_sha256(cfg) and res["seed"] == 5
+    for m in (1, 4, 16):
+        d = parse_descriptor(out / f"stage_{m:03d}" / "emva1288.txt")
+        assert (d["bits"], d["width"], d["height"]) == (cfg.dtdi.beta_bits, 128, 64)
+        temporal = [b for b in d["bright"] if len(b[2]) == 2]
+        spatial = [b for b in d["bright"] if len(b[2]) > 2]
+        assert len(temporal) >= 30 and len(spatial) == 1 and len(d["dark"]) == 2
+        exposures = {b[0] for b in d["bright"]} | {e for e, _ in d["dark"]}
+        assert len(exposures) == 1
+        assert exposures.pop() == pytest.approx(m * cfg.timing.t_int_s * 1e9)
+        photons = [b[1] for b in temporal]
+        assert photons == sorted(photons) and len(set(photons)) == len(photons)
+        assert photons == pytest.approx(res["results"][str(m)]["series"]["photons"])
+        # the images: 16-bit, the stage word, the right size; the pair mean matches the JSON
+        a, b = (tifffile.imread(p) for p in temporal[5][2])
+        assert a.dtype == np.uint16 and a.shape == (64, 128)
+        mean = 0.5 * (a.mean() + b.mean())
+        assert mean == pytest.approx(res["results"][str(m)]["series"]["mean_dn"][5])
+        top = max(tifffile.imread(p).max() for p in temporal[-1][2])
+        assert top <= 2**cfg.dtdi.beta_bits - 1
+        meta = json.loads(tifffile.TiffFile(temporal[0][2][0]).pages[0].description)
+        assert meta["seed"] == 5 and meta["stage"] == m
+    for name in ("ptc_results.json", "ptc_levels.csv", "ptc_summary.csv", "ptc.png", "snr.png"):
+        assert (out / name).stat().st_size > 0
+    assert (out / "ptc_summary.csv").read_text().startswith("# bench_sim ")
+    assert b"bench_sim" in (out / "ptc.png").read_bytes()[:4096]
+
+
+def _fast(cfg: BenchConfig, seed: int, out: Path) -> dict:
+    return run_ptc(cfg, [1, 3], seed, out, lines=8, columns=16, dense_levels=3, spatial_images=3)
+
+
+def test_ptc_is_deterministic(tmp_path: Path) -> None:
+    cfg = small_cfg()
+    _fast(cfg, 9, tmp_path / "a")
+    _fast(cfg, 9, tmp_path / "b")
+    _fast(cfg, 10, tmp_path / "c")
+    files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
+    assert len(files) > 100
+    for rel in files:
+        if rel.suffix == ".png":
+            continue
+        assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
+    img = Path("stage_003/images/bright_010_a.tif")
+    assert not np.array_equal(tifffile.imread(tmp_path / "a" / img), tifffile.imread(tmp_path / "c" / img))
+
+
+def test_cli_ptc_writes_results(tmp_path: Path) -> None:
+    cfg_path = tmp_path / "small.toml"
+    cfg_path.write_text(TOML)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(
+        app, ["ptc", str(cfg_path), "--stages", "1,4", "--seed", "3", "--out", str(out)]
+    )
+    assert r.exit_code == 0, r.output
+    res = json.loads((out / "ptc_results.json").read_text())
+    assert res["stages"] == [1, 4] and res["seed"] == 3
+    assert (res["image_lines"], res["image_columns"]) == (64, 64)
+    assert (out / "stage_004" / "emva1288.txt").is_file()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--stages", "1,17"], "stages must lie in 1..16"),
+        (["--stages", "0"], "stages must lie in 1..16"),
+        (["--stages", "a,b"], "--stages"),
+        (["--stages", "1,4", "--seed", "-1"], "seed"),
+    ],
+)
+def test_cli_bad_argument_one_line_error_no_output(tmp_path: Path, args: list[str], message: str) -> None:
+    cfg_path = tmp_path / "small.toml"
+    cfg_path.write_text(TOML)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(app, ["ptc", str(cfg_path), "--out", str(out), *args])
+    assert r.exit_code == 2
+    err = r.stderr if r.stderr else r.output
+    assert message in err and len(err.strip().splitlines()) == 1, err
+    assert not out.exists()
+
+
+def test_beta_above_16_is_refused_before_writing(tmp_path: Path) -> None:
+    cfg = small_cfg(dtdi={"beta_bits": 20})
+    with pytest.raises(BenchSimError, match="beta_bits <= 16"):
+        run_ptc(cfg, [1, 4], 0, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(BenchSimError, match="not a folder"):
+        run_ptc(small_cfg(), [1], 0, tmp_path / "file")
+
+
+def test_subtract_black_off_uses_the_accumulated_offset_as_pedestal(tmp_path: Path) -> None:
+    cfg = small_cfg(dtdi={"subtract_black": False, "beta_bits": 16})
+    res = _fast(cfg, 1, tmp_path)
+    for m in (1, 3):
+        r = res["results"][str(m)]
+        assert r["pedestal_dn"] == 0  # m * black (20 DN per row) already keeps the dark above 0
+        assert r["dark"]["mean_dn"] == pytest.approx(m * cfg.sensor.black_offset_dn, abs=1.0)
