@@ -14,6 +14,12 @@ def make_cfg(**sections: Any) -> BenchConfig:
     return with_overrides(load_config(), sections)
 
 
+#: every noise source of the pixel model switched off
+ALL_OFF = dict(
+    shot_noise=False, dark_noise=False, read_noise=False, prnu_enabled=False,
+    dsnu_enabled=False, column_fpn=False, quantization=False,
+)
+
 TINY = {
     "sensor": {"rows": 12, "columns": 48},
     "target": {"panel_lines": 96, "panel_columns": 48},

@@ -22,12 +22,9 @@ from bench_sim.sensor.dtdi import (
 )
 from bench_sim.sensor.emva import draw_fixed_pattern, expose, pixel_mean_var_dn
 from bench_sim.sensor.pipeline import sensor_dtdi_pass
+from tests.conftest import ALL_OFF
 
 T_INT_S = 100e-6
-ALL_OFF = dict(
-    shot_noise=False, dark_noise=False, read_noise=False, prnu_enabled=False,
-    dsnu_enabled=False, column_fpn=False, quantization=False,
-)
 
 
 def eq_1_2(v: np.ndarray, m: int, j: int) -> np.ndarray:

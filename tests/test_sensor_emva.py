@@ -15,12 +15,9 @@ from bench_sim.sensor.emva import (
     pixel_mean_var_dn,
     pixel_saturation_dn,
 )
+from tests.conftest import ALL_OFF
 
 T_INT_S = 100e-6
-ALL_OFF = dict(
-    shot_noise=False, dark_noise=False, read_noise=False, prnu_enabled=False,
-    dsnu_enabled=False, column_fpn=False, quantization=False,
-)
 
 
 def sensor(**kw) -> SensorConfig:

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from bench_sim.errors import BenchSimError
+from bench_sim.sensor.dtdi import full_scale_dn as dtdi_full_scale_dn
 
 __all__ = [
     "FusionResult",
@@ -74,8 +75,9 @@ def check_beta(beta: int) -> int:
 
 
 def full_scale_dn(beta: int) -> float:
-    """``Phi_FS = 2**beta`` [DN], the full-scale value of a ``beta``-bit output word (paper eq. 4)."""
-    return float(2 ** check_beta(beta))
+    """``Phi_FS = 2**beta`` [DN], the full-scale value of a ``beta``-bit output word (paper eq. 4),
+    as the DTDI stage defines it, for a validated ``beta``."""
+    return float(dtdi_full_scale_dn(check_beta(beta)))
 
 
 def clip_value_dn(beta: int) -> float:
