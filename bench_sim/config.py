@@ -172,6 +172,8 @@ class SpotLightConfig(_Section):
     aim_m: tuple[float, float, float] = (-0.0155, 0.0, 0.10)
     cutoff_deg: Annotated[float, Field(gt=0, le=90)] = 2.0
     beam_width_deg: Annotated[float, Field(gt=0, le=90)] = 1.9
+    spectrum: Literal["flat", "blackbody"] = Field("flat", description="spectral mode only")
+    temperature_k: Annotated[float, Field(ge=500, le=20000)] = 3200.0
 
     @model_validator(mode="after")
     def _beam(self) -> SpotLightConfig:
@@ -191,6 +193,8 @@ class FillLightConfig(_Section):
 
     enabled: bool = True
     irradiance_w_m2: Annotated[float, Field(ge=0)] = 6.0
+    spectrum: Literal["flat", "blackbody"] = Field("flat", description="spectral mode only")
+    temperature_k: Annotated[float, Field(ge=500, le=20000)] = 6500.0
 
 
 class LightsConfig(_Section):
@@ -209,6 +213,11 @@ class SensorConfig(_Section):
     pixel_pitch_m: PositiveFloat = 5.5e-6
     wavelength_m: Annotated[float, Field(gt=200e-9, lt=2000e-9)] = 550e-9
     quantum_efficiency: Annotated[float, Field(gt=0, le=1)] = 0.55
+    qe_curve: tuple[tuple[float, float], ...] | None = Field(
+        None,
+        description="spectral mode: (wavelength_m, relative QE) pairs, scaled so that QE at "
+        "wavelength_m is quantum_efficiency; default: a front-side-illuminated CMOS curve",
+    )
     full_well_e: PositiveFloat = 13500.0
     read_noise_e: Annotated[float, Field(ge=0)] = 13.0
     dark_current_e_s: Annotated[float, Field(ge=0)] = 125.0
@@ -272,6 +281,9 @@ class RenderConfig(_Section):
     engine: Literal["fast", "reference"] = "fast"
     variant: str = Field("auto", description="'auto' or a Mitsuba variant name")
     spectral: bool = Field(False, description="render spectrally and weight by the QE curve")
+    band_m: tuple[float, float] = Field(
+        (400e-9, 700e-9), description="spectral mode: wavelength band of the lights [m]"
+    )
     spp: Annotated[int, Field(ge=1, le=65536)] = 16
     subpixels: Annotated[int, Field(ge=1, le=8)] = Field(
         4, description="fast engine: sub-pixel records per pixel side"
@@ -282,6 +294,14 @@ class RenderConfig(_Section):
     emitter_samples: Annotated[int, Field(ge=1, le=64)] = 1
     bsdf_samples: Annotated[int, Field(ge=1, le=64)] = 1
     weak_sampling_weight: Annotated[float, Field(gt=0, le=1)] = 1e-3
+
+
+    @model_validator(mode="after")
+    def _band(self) -> RenderConfig:
+        lo, hi = self.band_m
+        if not 360e-9 <= lo < hi <= 830e-9:
+            raise ValueError(f"band_m = {list(self.band_m)} must satisfy 360e-9 <= low < high <= 830e-9")
+        return self
 
 
 class FusionConfig(_Section):
@@ -334,6 +354,19 @@ class BenchConfig(_Section):
                 f"drum.radius_m = {self.drum.radius_m} is too small for the {2 * half_h:.4g} m "
                 "along-track field of view (must exceed 4 x half height)"
             )
+        if self.render.spectral:
+            lo, hi = self.render.band_m
+            if not lo <= self.sensor.wavelength_m <= hi:
+                raise ValueError(
+                    f"sensor.wavelength_m = {self.sensor.wavelength_m} must lie in render.band_m = "
+                    f"{list(self.render.band_m)}"
+                )
+        if self.sensor.qe_curve is not None:
+            wl = [p[0] for p in self.sensor.qe_curve]
+            if len(wl) < 2 or any(b <= a for a, b in zip(wl, wl[1:], strict=False)):
+                raise ValueError("sensor.qe_curve: wavelengths must be at least two, increasing")
+            if any(not 0 <= p[1] <= 1 for p in self.sensor.qe_curve):
+                raise ValueError("sensor.qe_curve: relative QE values must lie in 0..1")
         if not math.isfinite(self.lens.magnification):
             raise ValueError("lens magnification is not finite")
         return self

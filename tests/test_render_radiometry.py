@@ -116,3 +116,20 @@ def test_airy_kernel_energy_matches_encircled_energy():
     inside = k[np.hypot(yy, xx) < first_zero].sum()
     # the kernel is truncated at the 5th ring (~99 % of the energy): compare to the truncated total
     assert inside == pytest.approx(0.838 / 0.99, abs=0.02)
+
+
+def test_diffraction_psf_keeps_energy_and_blurs_edges():
+    """The Airy PSF (f/22 here: the first dark ring at 1.5 pixels) conserves the photons of a
+    uniform field and lowers the contrast of fine bars."""
+    uni = {"layout": "uniform"}
+    a, _ = render_photons(tiny_cfg(target=uni, lens={"f_number": 22.0}), 2, np.random.default_rng(0),
+                          engine="fast")
+    b, _ = render_photons(tiny_cfg(target=uni, lens={"f_number": 22.0, "diffraction_psf": True}), 2,
+                          np.random.default_rng(0), engine="fast")
+    assert b.mean() == pytest.approx(a.mean(), rel=1e-3)
+    sharp, _ = render_photons(tiny_cfg(lens={"f_number": 22.0}), 4, np.random.default_rng(0),
+                              engine="fast", first_frame=60)
+    blurred, _ = render_photons(tiny_cfg(lens={"f_number": 22.0, "diffraction_psf": True}), 4,
+                                np.random.default_rng(0), engine="fast", first_frame=60)
+    assert blurred.std() < 0.97 * sharp.std()
+    assert blurred.mean() == pytest.approx(sharp.mean(), rel=0.01)

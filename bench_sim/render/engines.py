@@ -51,7 +51,8 @@ class ReferenceEngine:
         self.seed = int(seed)
         self.texture = drum_texture(mi, grid, geom)
         d = scene_dict(
-            mi, cfg, geom, self.texture, width=cfg.sensor.columns, height=cfg.sensor.rows, spp=self.spp
+            mi, cfg, geom, self.texture, width=cfg.sensor.columns, height=cfg.sensor.rows, spp=self.spp,
+            spectral=cfg.render.spectral,
         )
         self.scene = mi.load_dict(d)
 
@@ -100,21 +101,29 @@ class FastEngine:
         M, N, ss = cfg.sensor.rows, cfg.sensor.columns, cfg.render.subpixels
         spp = cfg.render.spp
 
-        def records(albedo: float) -> np.ndarray:
+        spectral = cfg.render.spectral
+
+        def records(albedo: float, aov: bool) -> np.ndarray:
             d = scene_dict(
                 mi, cfg, geom, {"type": "uniform", "value": albedo}, width=N * ss, height=M * ss,
-                spp=spp, aov_position=True,
+                spp=spp, aov_position=aov, spectral=spectral,
             )
             return _render_array(mi, mi.load_dict(d), spp, seed)
 
-        rec1 = records(1.0)
+        if spectral:
+            # radiance from the spectral film; hit positions (per record, averaged) from an aov
+            # render with an RGB film: the two cannot share one render in Mitsuba 3.9
+            pos = records(1.0, True)[..., -3:]
+            rec1 = np.concatenate([records(1.0, False)[..., :1], pos], axis=-1)
+        else:
+            rec1 = records(1.0, True)
         if cfg.drum.geometry == "analytic":
             # the drum is the only shape: a record either hit it (no light without its albedo)
             # or missed everything (sees the fill, independent of the albedo)
             miss = np.all(rec1[..., 1:4] == 0.0, axis=-1)
             s0 = np.where(miss, rec1[..., 0], 0.0).astype(np.float32)
         else:
-            s0 = records(0.0)[..., 0]  # same seed: the same rays, so D is exact per record
+            s0 = records(0.0, not spectral)[..., 0]  # same seed, same rays: D is exact per record
         self.static_radiance = s0.reshape(M, ss, N, ss).mean(axis=(1, 3))
         self.kernels = self._kernels(rec1[..., 0] - s0, rec1[..., 1:4])
         smeared = smear_filter(grid.values, grid.h_y_m, geom.smear_m)

@@ -69,12 +69,7 @@ def prepare(
         raise BenchSimError(f"frames = {frames}: must be at least 1")
     if name == "fast":
         check_fast_engine_valid(cfg)
-    if cfg.render.spectral:
-        raise BenchSimError(
-            "render.spectral = true: the spectral path is not implemented yet; the mono variant "
-            "renders in-band radiance at sensor.wavelength_m"
-        )
-    mi, choice = init_mitsuba(cfg.render.variant, "mono")
+    mi, choice = init_mitsuba(cfg.render.variant, "spectral" if cfg.render.spectral else "mono")
     geom = rig_geometry(cfg)
     grid = run_texture(cfg, geom, first_frame, frames)
     seed = int(rng.integers(0, 2**31 - 1))
@@ -101,6 +96,9 @@ def prepare(
         "variant": choice.variant,
         "llvm_path": choice.llvm_path,
         "spp": cfg.render.spp,
+        "spectral": cfg.render.spectral,
+        "photon_unit": "QE-equivalent photons at sensor.wavelength_m" if cfg.render.spectral
+        else "in-band photons at sensor.wavelength_m",
         "texture_shape": list(grid.shape),
         "texels_per_pixel": grid.q,
         "object_pixel_m": geom.object_pixel_m,

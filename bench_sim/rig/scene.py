@@ -87,6 +87,7 @@ def scene_dict(
     height: int,
     spp: int,
     aov_position: bool = False,
+    spectral: bool = False,
 ) -> dict[str, Any]:
     """Mitsuba scene description of the rig.
 
@@ -100,7 +101,13 @@ def scene_dict(
         Film size in film pixels: ``columns * s`` by ``rows * s`` for ``s`` sub-pixels per side.
     aov_position
         Wrap the integrator in an ``aov`` integrator that also outputs the hit position.
+    spectral
+        Spectral variant: the lights get their spectra and the film records the QE- and
+        photon-weighted radiance (``specfilm``, see :mod:`bench_sim.rig.spectra`); with
+        ``aov_position`` an ``hdrfilm`` is used instead (Mitsuba's ``aov`` integrator corrupts
+        memory with ``specfilm``), whose first channels are not radiance.
     """
+    from bench_sim.rig import spectra
     lens, R, L = cfg.lens, cfg.drum.radius_m, cfg.drum.length_m
     D = geom.camera_distance_m
     film = {
@@ -109,8 +116,12 @@ def scene_dict(
         "height": int(height),
         "rfilter": {"type": "box"},  # pixel value = mean of its samples
         "sample_border": False,
-        "pixel_format": "luminance",
     }
+    if spectral and not aov_position:
+        film = {k: v for k, v in film.items() if k != "pixel_format"}
+        film.update(type="specfilm", component_format="float32", Y=spectra.response_dict(cfg))
+    elif not spectral:
+        film["pixel_format"] = "luminance"
     sensor: dict[str, Any] = {
         "type": lens.model,
         "fov": geom.fov_x_deg,
@@ -152,7 +163,9 @@ def scene_dict(
         scene["strong"] = {
             "type": "spot",
             "to_world": _look_at(mi, strong.position_m, strong.aim_m),
-            "intensity": {"type": "uniform", "value": spot_intensity_w_sr(cfg)},
+            "intensity": spectra.light_spectrum(cfg, strong, spot_intensity_w_sr(cfg))
+            if spectral
+            else {"type": "uniform", "value": spot_intensity_w_sr(cfg)},
             "cutoff_angle": strong.cutoff_deg,
             "beam_width": strong.beam_width_deg,
         }
@@ -160,7 +173,9 @@ def scene_dict(
     if weak.enabled and weak.irradiance_w_m2 > 0:
         scene["weak"] = {
             "type": "constant",
-            "radiance": {"type": "uniform", "value": fill_radiance_w_m2_sr(cfg)},
+            "radiance": spectra.light_spectrum(cfg, weak, fill_radiance_w_m2_sr(cfg))
+            if spectral
+            else {"type": "uniform", "value": fill_radiance_w_m2_sr(cfg)},
         }
         # cosine-weighted BSDF sampling is ideal for a uniform fill seen by a diffuse surface:
         # send the emitter samples to the spot (notes: cuts the fill's noise ~30x), or, with the
