@@ -22,6 +22,7 @@ bench: setup
 	$(PY) benchmarks/bench_render.py
 	$(PY) benchmarks/bench_sensor.py
 	$(PY) benchmarks/bench_fusion.py
+	$(PY) benchmarks/bench_reproduce.py
 
 clean:
 	rm -rf $(VENV) .setup-stamp
