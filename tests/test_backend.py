@@ -95,3 +95,34 @@ def test_real_probe_of_this_machine_finds_a_working_backend():
     """On the project's machines (setup installs libllvm19) the LLVM backend passes its probe."""
     choice = choose_backend()
     assert choice.kind in ("cuda", "llvm"), choice.probes
+
+
+def test_scalar_fallback_renders_the_same_rig(tmp_path):
+    """The fallback variant (scalar_rgb: the wheel has no scalar_mono) runs both engines and gives
+    the LLVM result within Monte Carlo noise. Run in a child: the variant is chosen per process."""
+    import json
+    import os
+
+    code = (
+        "import json, numpy as np\n"
+        "from tests.conftest import tiny_cfg\n"
+        "from bench_sim.render.exposures import render_photons\n"
+        "out = {}\n"
+        "for eng in ('fast', 'reference'):\n"
+        "    ph, s = render_photons(tiny_cfg(), 2, np.random.default_rng(0), engine=eng)\n"
+        "    out[eng] = [s.info['variant'], float(ph.mean())]\n"
+        "print(json.dumps(out))\n"
+    )
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    res = {}
+    for variant in ("scalar", "auto"):
+        env = dict(os.environ, BENCH_SIM_VARIANT=variant, PYTHONPATH=root)
+        proc = subprocess.run(
+            [sys.executable, "-c", code], env=env, cwd=root, capture_output=True, text=True, timeout=600
+        )
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        res[variant] = json.loads(proc.stdout.strip().splitlines()[-1])
+    for eng in ("fast", "reference"):
+        assert res["scalar"][eng][0] == "scalar_rgb"
+        assert res["auto"][eng][0] != "scalar_rgb"
+        assert res["scalar"][eng][1] == pytest.approx(res["auto"][eng][1], rel=0.01)
