@@ -62,6 +62,7 @@ __all__ = [
     "DTDIAccumulator",
     "dtdi_direct",
     "run_dtdi",
+    "collect_stage_lines",
     "full_scale_dn",
     "complete_lines",
     "frames_needed",
@@ -345,33 +346,59 @@ def run_dtdi(
         Stage ``m`` -> (lines, N) ``uint32`` stage image.
     """
     st = validate_stages(stages)
-    acc: DTDIAccumulator | None = None
-    blocks: dict[int, list[np.ndarray]] = {m: [] for m in st}
-    kept = {m: 0 for m in st}
-    for chunk in _iter_chunks(frames):
-        if chunk.ndim != 3:
-            raise BenchSimError(f"frame chunk shape {chunk.shape}: expected (rows, columns) frames")
+
+    def pushed() -> Iterator[dict[int, np.ndarray]]:
+        acc: DTDIAccumulator | None = None
+        for chunk in _iter_chunks(frames):
+            if chunk.ndim != 3:
+                raise BenchSimError(f"frame chunk shape {chunk.shape}: expected (rows, columns) frames")
+            if acc is None:
+                acc = DTDIAccumulator(
+                    chunk.shape[2], st, beta_bits, black_offset_dn, subtract_black, pedestal_dn=pedestal_dn
+                )
+            yield acc.push_many(chunk)
         if acc is None:
-            acc = DTDIAccumulator(
-                chunk.shape[2], st, beta_bits, black_offset_dn, subtract_black, pedestal_dn=pedestal_dn
-            )
-        for m, block in acc.push_many(chunk).items():
+            raise BenchSimError("frames: the pass has no frames")
+
+    return collect_stage_lines(pushed(), st, lines)
+
+
+def collect_stage_lines(
+    blocks: Iterable[dict[int, np.ndarray]], stages: Sequence[int], lines: int | None = None
+) -> dict[int, np.ndarray]:
+    """Join the per-chunk stage blocks of a streaming pass into whole stage images.
+
+    Parameters
+    ----------
+    blocks
+        Per chunk, stage ``m`` -> (n, N) block of its next complete lines, in line order (what
+        :meth:`DTDIAccumulator.push_many` returns).
+    stages
+        The stages of the pass (validated, sorted).
+    lines
+        ``None``: keep every complete line; ``L``: lines ``0 .. L-1`` of every stage (an error
+        if the pass gave fewer).
+    """
+    st = tuple(stages)
+    kept_blocks: dict[int, list[np.ndarray]] = {m: [] for m in st}
+    kept = {m: 0 for m in st}
+    n_columns = 0
+    for got in blocks:
+        for m, block in got.items():
+            n_columns = block.shape[1]
             if lines is not None:
                 block = block[: max(int(lines) - kept[m], 0)]
             if len(block):
-                blocks[m].append(block)
+                kept_blocks[m].append(block)
                 kept[m] += len(block)
-    if acc is None:
-        raise BenchSimError("frames: the pass has no frames")
     if lines is not None and min(kept.values()) < int(lines):
         raise BenchSimError(
-            f"lines = {lines}: a pass of {acc.frames_seen} frames gives only "
-            f"{complete_lines(acc.frames_seen, st[-1])} complete lines of stage {st[-1]} "
-            f"(needs {frames_needed(int(lines), st)} frames)"
+            f"lines = {lines}: the pass gives only {kept[st[-1]]} complete lines of stage "
+            f"{st[-1]} (needs {frames_needed(int(lines), st)} frames)"
         )
     return {
-        m: (np.concatenate(b) if b else np.zeros((0, acc.n_columns), dtype=np.uint32))
-        for m, b in blocks.items()
+        m: (np.concatenate(b) if b else np.zeros((0, n_columns), dtype=np.uint32))
+        for m, b in kept_blocks.items()
     }
 
 

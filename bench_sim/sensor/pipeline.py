@@ -15,7 +15,7 @@ import numpy as np
 
 from bench_sim.config import DTDIConfig, SensorConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.sensor.dtdi import DTDIAccumulator, frames_needed, validate_stages
+from bench_sim.sensor.dtdi import DTDIAccumulator, collect_stage_lines, validate_stages
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, expose
 
 __all__ = ["sensor_dtdi_pass", "iter_sensor_dtdi", "DEFAULT_CHUNK_FRAMES"]
@@ -153,26 +153,8 @@ def sensor_dtdi_pass(
         Stage ``m`` -> (lines, C) ``uint32`` stage image (paper eq. 1-2, 4).
     """
     st = validate_stages(stages)
-    blocks: dict[int, list[np.ndarray]] = {m: [] for m in st}
-    kept = {m: 0 for m in st}
-    cols = 0
-    for got in iter_sensor_dtdi(
+    passes = iter_sensor_dtdi(
         photons, sensor, dtdi, t_int_s, st, rng, fixed=fixed, pedestal_dn=pedestal_dn,
         chunk_frames=chunk_frames,
-    ):
-        for m, block in got.items():
-            cols = block.shape[1]
-            if lines is not None:
-                block = block[: max(int(lines) - kept[m], 0)]
-            if len(block):
-                blocks[m].append(block)
-                kept[m] += len(block)
-    if lines is not None and min(kept.values()) < int(lines):
-        raise BenchSimError(
-            f"lines = {lines}: the pass gives only {kept[st[-1]]} complete lines of stage "
-            f"{st[-1]} (needs {frames_needed(int(lines), st)} frames)"
-        )
-    return {
-        m: (np.concatenate(b) if b else np.zeros((0, cols), dtype=np.uint32))
-        for m, b in blocks.items()
-    }
+    )
+    return collect_stage_lines(passes, st, lines)
