@@ -48,7 +48,8 @@ from bench_sim.metrics.emva1288 import (
     mean_var_from_pair,
 )
 from bench_sim.metrics.snr import snr_versus_signal
-from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern
+from bench_sim.sensor.dtdi import stage_dark_std_dn
+from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, pixel_mean_var_dn
 from bench_sim.sensor.pipeline import sensor_dtdi_pass
 
 __all__ = [
@@ -63,15 +64,6 @@ __all__ = [
 IMAGES: tuple[str, ...] = ("gamma1", "gamma2", "hdr")
 
 
-def _read_var_dn2(sensor: SensorConfig, t_int_s: float) -> float:
-    """Temporal dark variance of one raw read [DN^2]: ``K^2 (sigma_r^2 + mu_d) + 1/12``."""
-    k = sensor.conversion_gain_dn_per_e
-    var_e = (sensor.read_noise_e**2 if sensor.read_noise else 0.0) + (
-        sensor.dark_current_e_s * t_int_s if sensor.dark_noise else 0.0
-    )
-    return k * k * var_e + (1.0 / 12.0 if sensor.quantization else 0.0)
-
-
 def ptc_offset_dn(sensor: SensorConfig, dtdi: DTDIConfig, t_int_s: float, stage: int) -> float:
     """Total offset [DN] both stage words carry in the series (at least 1 DN).
 
@@ -81,11 +73,7 @@ def ptc_offset_dn(sensor: SensorConfig, dtdi: DTDIConfig, t_int_s: float, stage:
     ``dtdi.subtract_black`` off, at least the accumulated black offset ``m * black`` of the top
     stage.
     """
-    k = sensor.conversion_gain_dn_per_e
-    col = sensor.column_offset_dn if sensor.column_fpn else 0.0
-    dsnu = k * sensor.dsnu_e_s * t_int_s if sensor.dsnu_enabled else 0.0
-    var = stage**2 * col**2 + stage * (_read_var_dn2(sensor, t_int_s) + dsnu**2)
-    need = math.ceil(6.0 * math.sqrt(var))
+    need = math.ceil(6.0 * stage_dark_std_dn(sensor, t_int_s, stage))
     if not dtdi.subtract_black:
         need = max(need, math.ceil(stage * sensor.black_offset_dn))
     return float(max(need, 1))
@@ -108,7 +96,7 @@ def default_levels(
     ADC top above the black offset). The prediction only places the levels.
     """
     k, qe = sensor.conversion_gain_dn_per_e, sensor.quantum_efficiency
-    sigma = math.sqrt(max(_read_var_dn2(sensor, t_int_s), 1.0 / 12.0))
+    sigma = math.sqrt(max(float(pixel_mean_var_dn(0.0, sensor, t_int_s)[1]), 1.0 / 12.0))
     p_lo = 0.25 * sigma / math.sqrt(mu2) / (k * qe)
     pixel_top = min(sensor.full_well_e * k, (2**sensor.adc_bits - 1) - sensor.black_offset_dn)
     word_top = (2**beta_bits - 1 - offset_dn) / mu1

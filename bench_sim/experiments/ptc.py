@@ -74,15 +74,19 @@ from bench_sim.metrics.emva1288 import (
     snr_curve,
     spatial_nonuniformity,
 )
-from bench_sim.sensor.dtdi import full_scale_dn, stage_mean_var_dn, validate_stages
-from bench_sim.sensor.emva import QUANTIZATION_VAR_DN2, draw_fixed_pattern, pixel_saturation_dn
+from bench_sim.sensor.dtdi import full_scale_dn, stage_dark_std_dn, stage_mean_var_dn, validate_stages
+from bench_sim.sensor.emva import (
+    QUANTIZATION_VAR_DN2,
+    draw_fixed_pattern,
+    pixel_mean_var_dn,
+    pixel_saturation_dn,
+)
 from bench_sim.sensor.pipeline import sensor_dtdi_pass
 
 __all__ = [
     "run_ptc",
     "plan_levels",
     "ptc_pedestals",
-    "stage_dark_std_dn",
     "DEFAULT_LINES",
     "DEFAULT_COLUMNS",
     "DEFAULT_LOG_LEVELS",
@@ -102,33 +106,12 @@ DENSE_FROM, DENSE_TO = 0.90, 1.02
 MAX_FILE_BITS = 16
 
 
-def _dark_temporal_var_px_dn2(cfg: BenchConfig) -> float:
-    s = cfg.sensor
-    mu_d = s.dark_current_e_s * cfg.timing.t_int_s
-    var_e = (s.read_noise_e**2 if s.read_noise else 0.0) + (mu_d if s.dark_noise else 0.0)
-    return s.conversion_gain_dn_per_e**2 * var_e + (QUANTIZATION_VAR_DN2 if s.quantization else 0.0)
-
-
-def stage_dark_std_dn(cfg: BenchConfig, stage: int) -> float:
-    """Model spread [DN] of the dark value of stage ``m`` over pixels and time.
-
-    Temporal: ``m`` independent reads. Fixed: DSNU of ``m`` pixels (independent) and the column
-    offset, the same in all ``m`` rows of a column (so ``m`` times its rms).
-    """
-    s = cfg.sensor
-    k = s.conversion_gain_dn_per_e
-    temporal = stage * _dark_temporal_var_px_dn2(cfg)
-    dsnu = stage * (k * s.dsnu_e_s * cfg.timing.t_int_s) ** 2 if s.dsnu_enabled else 0.0
-    col = (stage * s.column_offset_dn) ** 2 if s.column_fpn else 0.0
-    return math.sqrt(temporal + dsnu + col)
-
-
 def ptc_pedestals(cfg: BenchConfig, stages: tuple[int, ...]) -> dict[int, int]:
     """Pedestal [DN] per stage that keeps the dark signal 5 sigma above 0 (see module doc)."""
     out: dict[int, int] = {}
     b = cfg.sensor.black_offset_dn
     for m in stages:
-        need = 5.0 * stage_dark_std_dn(cfg, m) + 1.0
+        need = 5.0 * stage_dark_std_dn(cfg.sensor, cfg.timing.t_int_s, m) + 1.0
         if not cfg.dtdi.subtract_black:
             need -= m * b
         out[m] = max(0, math.ceil(need))
@@ -152,7 +135,7 @@ def _stage_snr1_photons(cfg: BenchConfig, stage: int) -> float:
     """Model photons per pixel per frame at which stage ``m`` reaches SNR = 1."""
     s = cfg.sensor
     k = s.conversion_gain_dn_per_e
-    var_e = stage * _dark_temporal_var_px_dn2(cfg) / k**2
+    var_e = stage * float(pixel_mean_var_dn(0.0, s, cfg.timing.t_int_s)[1]) / k**2
     return (math.sqrt(var_e + 0.25) + 0.5) / s.quantum_efficiency / stage
 
 

@@ -50,6 +50,7 @@ columns, ``O(M * N)``, independent of the number of lines.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
@@ -69,6 +70,7 @@ __all__ = [
     "validate_stages",
     "stage_pedestals",
     "stage_mean_var_dn",
+    "stage_dark_std_dn",
 ]
 
 
@@ -400,6 +402,22 @@ def collect_stage_lines(
         m: (np.concatenate(b) if b else np.zeros((0, n_columns), dtype=np.uint32))
         for m, b in kept_blocks.items()
     }
+
+
+def stage_dark_std_dn(sensor: SensorConfig, t_int_s: float, stage: int) -> float:
+    """Model spread [DN] of the dark value of stage ``m`` over pixels and time.
+
+    ``sigma^2 = m sigma_y.dark^2 + m (K dsnu t)^2 + (m col)^2``: the temporal dark noise of
+    ``m`` independent reads (:func:`bench_sim.sensor.emva.pixel_mean_var_dn` at 0 photons) and
+    the DSNU of ``m`` pixels add incoherently; the column amplifier offset is the same in all
+    ``m`` rows of a column, so it adds coherently. Switched-off sources drop out.
+    """
+    m = int(stage)
+    temporal = m * float(pixel_mean_var_dn(0.0, sensor, t_int_s)[1])
+    k = sensor.conversion_gain_dn_per_e
+    dsnu = m * (k * sensor.dsnu_e_s * t_int_s) ** 2 if sensor.dsnu_enabled else 0.0
+    col = (m * sensor.column_offset_dn) ** 2 if sensor.column_fpn else 0.0
+    return math.sqrt(temporal + dsnu + col)
 
 
 def stage_mean_var_dn(
