@@ -132,8 +132,6 @@ class FastEngine:
         self._planes = [
             [np.ascontiguousarray(smeared[a::q, b::q]) for b in range(q)] for a in range(q)
         ]
-        self.records_per_pixel = ss * ss
-        self.taps = int(np.mean([k.weights.shape[0] * k.weights.shape[1] for k in self.kernels]))
 
     def _kernels(self, d_rec: np.ndarray, pos: np.ndarray) -> list[_RowKernel]:
         cfg, geom, grid = self.cfg, self.geom, self.grid
