@@ -35,6 +35,7 @@ __all__ = [
     "FusionConfig",
     "BenchConfig",
     "DEFAULT_CONFIG_PATH",
+    "SCENES_DIR",
     "load_config",
     "config_from_dict",
     "with_overrides",
@@ -42,8 +43,9 @@ __all__ = [
     "config_sha256",
 ]
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_CONFIG_PATH = REPO_ROOT / "scenes" / "paper_rig.toml"
+#: The scenes shipped inside the package (``scenes/`` in a source checkout links here).
+SCENES_DIR = Path(__file__).resolve().parent / "scenes"
+DEFAULT_CONFIG_PATH = SCENES_DIR / "paper_rig.toml"
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 Fraction = Annotated[float, Field(ge=0, le=1)]

@@ -11,6 +11,7 @@ import contextlib
 import hashlib
 import json
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -22,6 +23,9 @@ from bench_sim.errors import BenchSimError
 
 __all__ = [
     "atomic_path",
+    "output_set",
+    "check_output_dir",
+    "OUTPUT_MARKER",
     "write_json",
     "read_json",
     "write_exr",
@@ -59,6 +63,106 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
+        raise
+
+
+#: File written last into every output folder made by :func:`output_set`; its presence marks a
+#: complete set, and only folders holding it (or empty ones) are ever replaced by a rerun.
+OUTPUT_MARKER = ".bench-sim-output.json"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove_stale_temporaries(out: Path) -> None:
+    """Remove ``.NAME.partial-PID-*`` / ``.NAME.old-PID-*`` folders beside ``out`` whose process
+    is gone (left by a killed run)."""
+    for cand in out.parent.glob(f".{out.name}.*-*"):
+        parts = cand.name[len(out.name) + 2 :].split("-")
+        if len(parts) < 2 or parts[0] not in ("partial", "old") or not parts[1].isdigit():
+            continue
+        if not _pid_alive(int(parts[1])):
+            shutil.rmtree(cand, ignore_errors=True)
+
+
+def check_output_dir(out: str | os.PathLike[str], what: str = "--out") -> Path:
+    """Check, before any computation, that ``out`` can receive an output set.
+
+    Returns the resolved path. Raises :class:`BenchSimError` (one line) when ``out`` is a file,
+    lies under a file, is a non-empty folder that bench_sim did not write, or its parent is not
+    writable.
+    """
+    out = Path(out).expanduser().resolve()
+    for anc in (out, *out.parents):
+        if anc.exists():
+            if anc.is_file() or not anc.is_dir():
+                raise BenchSimError(f"{what} = {str(out)!r}: {anc} is a file, not a folder")
+            break
+    if out.is_dir() and any(out.iterdir()) and not (out / OUTPUT_MARKER).is_file():
+        raise BenchSimError(
+            f"{what} = {str(out)!r}: folder exists, is not empty and was not written by bench_sim "
+            "(a rerun replaces the whole folder): choose a new or empty folder"
+        )
+    parent = out.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise BenchSimError(f"{what} = {str(out)!r}: {parent} is not writable")
+    return out
+
+
+@contextlib.contextmanager
+def output_set(
+    out: str | os.PathLike[str], record: Mapping[str, Any] | None = None, what: str = "--out"
+) -> Iterator[Path]:
+    """Write a set of output files as one: yield a temporary folder, rename it onto ``out``.
+
+    The folder is created beside ``out`` (same file system) as ``.NAME.partial-PID-XXXX``. When
+    the block completes, :data:`OUTPUT_MARKER` (``record`` as JSON) is written last and the folder
+    replaces ``out`` whole: files of an earlier run never mix with the new ones. On any exception
+    (Ctrl-C included) the temporary folder is removed and ``out`` keeps its previous complete set
+    (or stays absent). Temporaries of killed runs are removed by the next run.
+
+    Parameters
+    ----------
+    out
+        Destination folder. It must not exist, be empty, or hold an earlier bench_sim output
+        set (see :func:`check_output_dir`).
+    record
+        Content of the completion record (command, version, ...). No wall-clock times in it, so
+        two runs with the same config and seed give identical files.
+    what
+        Name of the option or argument for error messages.
+    """
+    out = check_output_dir(out, what)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(out)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
+    except OSError as exc:
+        raise BenchSimError(f"{what} = {str(out)!r}: cannot create a folder there ({exc.strerror})") from None
+    try:
+        yield tmp
+        write_json(tmp / OUTPUT_MARKER, dict(record or {}))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp creates 0700
+        old: Path | None = None
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
+            os.replace(out, old / "set")
+        os.replace(tmp, out)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
         raise
 
 
