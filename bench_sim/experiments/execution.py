@@ -1,0 +1,248 @@
+"""Execution layer: many independent runs of the chain on ``dask.distributed``.
+
+Sweeps (one task per parameter point) and datasets (one task per sample) run here, on a
+``LocalCluster`` of worker processes by default or on an existing cluster given by its scheduler
+address (``tcp://HOST:PORT``; start one with ``dask scheduler`` and ``dask worker ADDRESS`` on
+each machine). One module serves both, so every experiment gets the same guarantees:
+
+- **Determinism.** Task ``i`` of a run with root seed ``s`` draws from
+  :func:`task_seed_sequence` ``(s, i)``, which is ``numpy.random.SeedSequence(s).spawn(n)[i]``:
+  its result depends only on ``(s, i)`` and the task's own input, never on the number of workers,
+  on which worker ran it or on the order of completion.
+- **Failure isolation.** A task that raises is recorded as a :class:`TaskOutcome` with a one-line
+  error; the other tasks go on.
+- **Reuse inside a worker.** Worker processes live for the whole run; :func:`worker_cache` keeps
+  expensive objects (Mitsuba scenes, compiled kernels, render records) between the tasks a worker
+  runs, and the render module's own record cache is process-level too.
+- **Results as they complete.** :func:`run_tasks` calls ``on_result`` in the client process as
+  each task finishes, so callers write each point or sample as soon as it is done and a killed
+  run can be resumed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+
+from bench_sim.errors import BenchSimError
+
+__all__ = [
+    "TaskOutcome",
+    "task_seed_sequence",
+    "task_generator",
+    "open_client",
+    "run_tasks",
+    "worker_cache",
+    "default_workers",
+]
+
+T = TypeVar("T")
+
+_CACHE: dict[str, Any] = {}
+
+
+@dataclass(frozen=True)
+class TaskOutcome:
+    """What one task gave back.
+
+    Attributes
+    ----------
+    index
+        The task's index in the run (its position in ``args``).
+    value
+        The function's return value, or ``None`` if it failed.
+    error
+        ``None`` on success, else one line: ``"ErrorType: message"``.
+    wall_s
+        Wall time of the task inside the worker [s].
+    worker
+        Address of the worker that ran it (``"local"`` for in-process runs).
+    """
+
+    index: int
+    value: Any
+    error: str | None
+    wall_s: float
+    worker: str
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def task_seed_sequence(root_seed: int, index: int) -> np.random.SeedSequence:
+    """The independent stream of task ``index`` under ``root_seed``.
+
+    Equal to ``numpy.random.SeedSequence(root_seed).spawn(n)[index]`` for any ``n > index``
+    (spawned children differ from their parent only by the spawn key), without spawning the
+    ``index`` children before it: a resumed run or ``--only I`` regenerates task ``I`` alone.
+    """
+    if root_seed < 0 or index < 0:
+        raise BenchSimError(f"seed = {root_seed}, index = {index}: both must be >= 0")
+    return np.random.SeedSequence(int(root_seed), spawn_key=(int(index),))
+
+
+def task_generator(root_seed: int, index: int) -> np.random.Generator:
+    """A ``numpy.random.Generator`` on :func:`task_seed_sequence` ``(root_seed, index)``."""
+    return np.random.default_rng(task_seed_sequence(root_seed, index))
+
+
+def worker_cache(key: str, factory: Callable[[], T]) -> T:
+    """Return the object cached under ``key`` in this process, making it with ``factory`` once.
+
+    Dask worker processes run many tasks; objects cached here (a Mitsuba scene, render records)
+    survive between them. In the client process (``workers = 0``) it is an ordinary cache.
+    """
+    if key not in _CACHE:
+        _CACHE[key] = factory()
+    return _CACHE[key]
+
+
+def default_workers() -> int:
+    """Worker processes of a local cluster by default: the number of usable cores."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    msg = text[0] if text else ""
+    return f"{type(exc).__name__}: {msg}" if msg else type(exc).__name__
+
+
+def _run_one(func: Callable[[Any], Any], index: int, arg: Any) -> TaskOutcome:
+    """Run one task, timing it and turning an exception into a one-line error."""
+    try:
+        from distributed import get_worker
+
+        where = get_worker().address
+    except (ImportError, ValueError):
+        where = "local"
+    t0 = time.perf_counter()
+    try:
+        value = func(arg)
+    except Exception as exc:  # a failed task is recorded and the run goes on
+        if os.environ.get("BENCH_SIM_DEBUG") == "1":
+            traceback.print_exc()
+        return TaskOutcome(index, None, _one_line(exc), time.perf_counter() - t0, where)
+    return TaskOutcome(index, value, None, time.perf_counter() - t0, where)
+
+
+@contextlib.contextmanager
+def open_client(
+    workers: int | None = None, scheduler: str | None = None, *, connect_timeout_s: float = 20.0
+) -> Iterator[Any]:
+    """A ``dask.distributed.Client`` for a run; ``None`` for in-process execution.
+
+    Parameters
+    ----------
+    workers
+        Worker processes of a new ``LocalCluster`` (one thread each; default
+        :func:`default_workers`). ``0`` runs every task in this process, one after the other
+        (no Dask at all: for debugging and for tiny runs).
+    scheduler
+        Address of a running scheduler (``tcp://HOST:PORT``); ``workers`` is then ignored.
+    connect_timeout_s
+        How long to wait for the scheduler before giving up with a one-line error.
+    """
+    if scheduler is None and workers == 0:
+        yield None
+        return
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=f"{connect_timeout_s}s")
+        except (OSError, TimeoutError) as exc:
+            raise BenchSimError(
+                f"--scheduler = {scheduler!r}: cannot reach a Dask scheduler there ({_one_line(exc)})"
+            ) from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = default_workers() if workers is None else int(workers)
+    if n < 0:
+        raise BenchSimError(f"--workers = {n}: must be >= 0 (0 runs in this process)")
+    cluster = LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=logging.ERROR,
+        # one core per worker: the chain's own thread pools use one thread in a worker
+        env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
+    )
+    client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()
+
+
+def run_tasks(
+    func: Callable[[Any], Any],
+    args: Sequence[Any],
+    *,
+    client: Any,
+    indices: Sequence[int] | None = None,
+    on_result: Callable[[TaskOutcome], None] | None = None,
+) -> list[TaskOutcome]:
+    """Run ``func(arg)`` for every ``arg`` and report each outcome as it completes.
+
+    Parameters
+    ----------
+    func
+        A module-level (picklable) function of one argument. It must derive all its randomness
+        from its argument (e.g. a seed from :func:`task_seed_sequence` carried in it).
+    args
+        One argument per task.
+    client
+        From :func:`open_client`; ``None`` runs the tasks here, in order.
+    indices
+        The task indices reported in :attr:`TaskOutcome.index` (default ``0 .. len(args)-1``);
+        a resumed run passes the indices of the tasks still to do.
+    on_result
+        Called in this process with each outcome, in completion order.
+
+    Returns
+    -------
+    list of TaskOutcome
+        In the order of ``args``.
+    """
+    idx = list(range(len(args))) if indices is None else [int(i) for i in indices]
+    if len(idx) != len(args):
+        raise BenchSimError(f"indices: {len(idx)} given for {len(args)} tasks")
+    outcomes: dict[int, TaskOutcome] = {}
+    if client is None:
+        for i, arg in zip(idx, args, strict=True):
+            out = _run_one(func, i, arg)
+            outcomes[i] = out
+            if on_result is not None:
+                on_result(out)
+        return [outcomes[i] for i in idx]
+    from distributed import as_completed
+
+    futures = client.map(_run_one, [func] * len(args), idx, list(args), pure=False)
+    try:
+        for fut in as_completed(futures):
+            out = fut.result()
+            outcomes[out.index] = out
+            if on_result is not None:
+                on_result(out)
+    except BaseException:
+        client.cancel(futures)
+        raise
+    return [outcomes[i] for i in idx]

@@ -1,0 +1,74 @@
+"""The execution layer: per-task streams, failure isolation, same results in and out of Dask."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench_sim.errors import BenchSimError
+from bench_sim.experiments.execution import (
+    open_client,
+    run_tasks,
+    task_generator,
+    task_seed_sequence,
+    worker_cache,
+)
+
+
+def _draw(arg: tuple[int, int]) -> list[float]:
+    """A task: four normal draws from its own stream; task 3 fails."""
+    seed, i = arg
+    if i == 3:
+        raise BenchSimError("point 3: refused\nsecond line is dropped")
+    return task_generator(seed, i).normal(size=4).tolist()
+
+
+@pytest.mark.parametrize("index", [0, 1, 7, 31])
+def test_task_stream_is_the_spawned_child(index: int) -> None:
+    spawned = np.random.SeedSequence(1234).spawn(32)[index]
+    assert task_seed_sequence(1234, index).generate_state(4).tolist() == spawned.generate_state(4).tolist()
+
+
+def test_streams_differ_between_tasks() -> None:
+    a = task_generator(5, 0).normal(size=1000)
+    b = task_generator(5, 1).normal(size=1000)
+    assert abs(np.corrcoef(a, b)[0, 1]) < 0.15
+
+
+def test_local_cluster_equals_in_process_and_isolates_failures() -> None:
+    args = [(11, i) for i in range(6)]
+    with open_client(workers=0) as client:
+        serial = run_tasks(_draw, args, client=client)
+    seen: list[int] = []
+    with open_client(workers=2) as client:
+        parallel = run_tasks(_draw, args, client=client, on_result=lambda o: seen.append(o.index))
+    assert sorted(seen) == list(range(6))
+    for s, p in zip(serial, parallel, strict=True):
+        assert s.index == p.index
+        assert s.value == p.value
+        assert s.error == p.error
+    assert not parallel[3].ok
+    assert parallel[3].error == "BenchSimError: point 3: refused"
+    assert all(o.ok for i, o in enumerate(parallel) if i != 3)
+    assert {o.worker for o in parallel} != {"local"}
+
+
+def test_resumed_indices_keep_their_streams() -> None:
+    full = run_tasks(_draw, [(2, i) for i in range(5)], client=None)
+    part = run_tasks(_draw, [(2, 4), (2, 1)], client=None, indices=[4, 1])
+    assert [o.index for o in part] == [4, 1]
+    assert part[0].value == full[4].value and part[1].value == full[1].value
+
+
+def test_worker_cache_builds_once() -> None:
+    calls: list[int] = []
+    key = "test-worker-cache-builds-once"
+    assert worker_cache(key, lambda: calls.append(1) or "made") == "made"
+    assert worker_cache(key, lambda: calls.append(1) or "again") == "made"
+    assert calls == [1]
+
+
+def test_unreachable_scheduler_is_one_line() -> None:
+    with pytest.raises(BenchSimError, match=r"^--scheduler = 'tcp://127.0.0.1:9': cannot reach"):
+        with open_client(scheduler="tcp://127.0.0.1:9", connect_timeout_s=2):
+            pass
