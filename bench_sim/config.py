@@ -36,6 +36,9 @@ __all__ = [
     "BenchConfig",
     "DEFAULT_CONFIG_PATH",
     "SCENES_DIR",
+    "BETA_BITS_MIN",
+    "BETA_BITS_MAX",
+    "TRA_METHODS",
     "load_config",
     "config_from_dict",
     "with_overrides",
@@ -46,6 +49,22 @@ __all__ = [
 #: The scenes shipped inside the package (``scenes/`` in a source checkout links here).
 SCENES_DIR = Path(__file__).resolve().parent / "scenes"
 DEFAULT_CONFIG_PATH = SCENES_DIR / "paper_rig.toml"
+
+#: Bounds of the DTDI output word length ``beta`` [bits] (the one definition; see
+#: :func:`bench_sim.sensor.model.check_beta_bits`).
+BETA_BITS_MIN, BETA_BITS_MAX = 1, 32
+
+#: Display transforms of ``Gamma_TRA`` (``fusion.tra``, ``bench-sim fuse --tra-method``,
+#: :func:`bench_sim.fusion.tonemap.tone_map`): name -> formula (``x`` HDR value, ``X`` full scale,
+#: ``y`` display value in 0..1).
+TRA_METHODS: dict[str, str] = {
+    "log": "y = ln(1 + max(x, 0)) / ln(1 + X)",
+    "gamma": "y = clip(x / X, 0, 1) ** (1 / 2.2)",
+    "histeq": "y = (C(x) - C(x_min)) / (P - C(x_min)), C = cumulative count of exact values",
+    "reinhard": "OpenCV createTonemapReinhard(gamma=2.2) on max(x / X, 0.5 / X) (Reinhard et al. 2005)",
+    "drago": "OpenCV createTonemapDrago(gamma=2.2) on max(x / X, 0.5 / X) (Drago et al. 2003)",
+    "mantiuk": "OpenCV createTonemapMantiuk(gamma=2.2) on max(x / X, 0.5 / X) (Mantiuk et al. 2006)",
+}
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 Fraction = Annotated[float, Field(ge=0, le=1)]
@@ -271,10 +290,28 @@ class TimingConfig(_Section):
 
 
 class DTDIConfig(_Section):
-    """Digital TDI accumulation: output word of ``beta_bits`` (Phi_FS = 2**beta, eq. 4)."""
+    """Digital TDI accumulation: output word of ``beta_bits`` (Phi_FS = 2**beta, eq. 4).
 
-    beta_bits: Annotated[int, Field(ge=1, le=32)] = 12
+    ``pedestal_dn`` is a digital pedestal added to every stage sum and kept in the word (as
+    real DTDI cameras do): it keeps the dark signal's noise above 0 DN, so dark statistics are
+    unbiased, at the cost of ``pedestal_dn`` DN of the word's range. Every consumer (fusion,
+    metrics, reports, ``ptc``) subtracts it again.
+    """
+
+    beta_bits: Annotated[int, Field(ge=BETA_BITS_MIN, le=BETA_BITS_MAX)] = 12
     subtract_black: bool = True
+    pedestal_dn: Annotated[int, Field(ge=0)] = Field(
+        64, description="digital pedestal added to every stage sum and kept in the word [DN]"
+    )
+
+    @model_validator(mode="after")
+    def _pedestal_in_word(self) -> DTDIConfig:
+        if self.pedestal_dn >= 2 ** (self.beta_bits - 1):
+            raise ValueError(
+                f"pedestal_dn = {self.pedestal_dn} must be below half the {self.beta_bits}-bit word "
+                f"({2 ** (self.beta_bits - 1)} DN); lower it or widen beta_bits"
+            )
+        return self
 
 
 class RenderConfig(_Section):
@@ -311,7 +348,7 @@ class FusionConfig(_Section):
 
     mu1: Annotated[int, Field(ge=1)] = 10
     mu2: Annotated[int, Field(ge=1)] = 80
-    tra: Literal["log", "gamma", "histeq", "reinhard", "drago", "mantiuk"] = "log"
+    tra: Literal[tuple(TRA_METHODS)] = "log"  # type: ignore[valid-type]
 
     @model_validator(mode="after")
     def _order(self) -> FusionConfig:

@@ -14,23 +14,12 @@ from bench_sim.fusion import (
     gamma_tra,
     merge_debevec_opencv,
     merge_mertens_opencv,
-    stage_read_variance_dn2,
     tone_map,
 )
 from bench_sim.fusion.tonemap import tra_histeq
 
 K = 0.072  # DN/e-
 SIGMA_D = 13.0  # e-
-
-
-def test_read_variance_formula() -> None:
-    # var = m (K^2 (sigma_d^2 + mu_e) + 1/12)
-    v = stage_read_variance_dn2(80, 1000.0, conversion_gain_dn_per_e=K, dark_noise_e=SIGMA_D)
-    assert v == pytest.approx(80 * (K**2 * (169 + 1000) + 1 / 12))
-    v0 = stage_read_variance_dn2(
-        10, -5.0, conversion_gain_dn_per_e=K, dark_noise_e=0.0, quantization=False
-    )
-    assert v0 == 0.0
 
 
 def test_inverse_variance_closed_form_and_saturation() -> None:

@@ -48,8 +48,8 @@ from bench_sim.metrics.emva1288 import (
     mean_var_from_pair,
 )
 from bench_sim.metrics.snr import snr_versus_signal
-from bench_sim.sensor.dtdi import stage_dark_std_dn
-from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, pixel_mean_var_dn
+from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern
+from bench_sim.sensor.model import stage_dark_std_dn, stage_saturation_photons, stage_snr1_photons
 from bench_sim.sensor.pipeline import sensor_dtdi_pass
 
 __all__ = [
@@ -90,17 +90,15 @@ def default_levels(
 ) -> np.ndarray:
     """Photon levels of the series: 0 (dark) and ``n_levels`` geometric levels [photons/pixel/frame].
 
-    From a quarter of the predicted SNR = 1 point of stage ``mu2`` (read-noise limited,
-    ``m s / sqrt(m sigma^2) = 1``) to twice the predicted saturation of stage ``mu1`` (the
-    smaller of the word, ``(2**beta - 1 - offset) / mu1`` per read, and the pixel: full well or
-    ADC top above the black offset). The prediction only places the levels.
+    From a quarter of the predicted SNR = 1 point of stage ``mu2``
+    (:func:`bench_sim.sensor.model.stage_snr1_photons`) to twice the predicted saturation of
+    stage ``mu1`` (:func:`bench_sim.sensor.model.stage_saturation_photons`, the word with the
+    offset or the pixel). The prediction only places the levels.
     """
-    k, qe = sensor.conversion_gain_dn_per_e, sensor.quantum_efficiency
-    sigma = math.sqrt(max(float(pixel_mean_var_dn(0.0, sensor, t_int_s)[1]), 1.0 / 12.0))
-    p_lo = 0.25 * sigma / math.sqrt(mu2) / (k * qe)
-    pixel_top = min(sensor.full_well_e * k, (2**sensor.adc_bits - 1) - sensor.black_offset_dn)
-    word_top = (2**beta_bits - 1 - offset_dn) / mu1
-    p_hi = 2.0 * min(pixel_top, word_top) / (k * qe)
+    p_lo = 0.25 * stage_snr1_photons(sensor, t_int_s, mu2)
+    p_hi = 2.0 * stage_saturation_photons(
+        sensor, t_int_s, mu1, beta_bits=beta_bits, pedestal_dn=offset_dn
+    )
     return np.concatenate([[0.0], np.geomspace(p_lo, p_hi, n_levels)])
 
 

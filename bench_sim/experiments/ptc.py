@@ -74,12 +74,15 @@ from bench_sim.metrics.emva1288 import (
     snr_curve,
     spatial_nonuniformity,
 )
-from bench_sim.sensor.dtdi import full_scale_dn, stage_dark_std_dn, stage_mean_var_dn, validate_stages
-from bench_sim.sensor.emva import (
+from bench_sim.sensor.dtdi import validate_stages
+from bench_sim.sensor.emva import draw_fixed_pattern
+from bench_sim.sensor.model import (
     QUANTIZATION_VAR_DN2,
-    draw_fixed_pattern,
-    pixel_mean_var_dn,
-    pixel_saturation_dn,
+    dark_noise_e,
+    stage_dark_std_dn,
+    stage_mean_var_dn,
+    stage_saturation_photons,
+    stage_snr1_photons,
 )
 from bench_sim.sensor.pipeline import sensor_dtdi_pass
 
@@ -119,24 +122,10 @@ def ptc_pedestals(cfg: BenchConfig, stages: tuple[int, ...]) -> dict[int, int]:
 
 
 def _stage_saturation_photons(cfg: BenchConfig, stage: int, pedestal_dn: float) -> float:
-    """Predicted photons per pixel per frame at which stage ``m`` saturates (model)."""
-    s = cfg.sensor
-    k = s.conversion_gain_dn_per_e
-    e_px = min(s.full_well_e, (pixel_saturation_dn(s) - s.black_offset_dn) / k)
-    word = full_scale_dn(cfg.dtdi.beta_bits) - 1 - pedestal_dn
-    if not cfg.dtdi.subtract_black:
-        word -= stage * s.black_offset_dn
-    e_word = word / (stage * k)
-    e_sat = min(e_px, e_word) - s.dark_current_e_s * cfg.timing.t_int_s
-    return max(e_sat, 1e-6) / s.quantum_efficiency
-
-
-def _stage_snr1_photons(cfg: BenchConfig, stage: int) -> float:
-    """Model photons per pixel per frame at which stage ``m`` reaches SNR = 1."""
-    s = cfg.sensor
-    k = s.conversion_gain_dn_per_e
-    var_e = stage * float(pixel_mean_var_dn(0.0, s, cfg.timing.t_int_s)[1]) / k**2
-    return (math.sqrt(var_e + 0.25) + 0.5) / s.quantum_efficiency / stage
+    return stage_saturation_photons(
+        cfg.sensor, cfg.timing.t_int_s, stage, beta_bits=cfg.dtdi.beta_bits,
+        subtract_black=cfg.dtdi.subtract_black, pedestal_dn=pedestal_dn,
+    )
 
 
 def plan_levels(
@@ -153,7 +142,7 @@ def plan_levels(
     stage's predicted saturation. Levels closer than 0.5 % are merged.
     """
     p_sat = {m: _stage_saturation_photons(cfg, m, pedestals[m]) for m in stages}
-    p_lo = 0.25 * min(_stage_snr1_photons(cfg, m) for m in stages)
+    p_lo = 0.25 * min(stage_snr1_photons(cfg.sensor, cfg.timing.t_int_s, m) for m in stages)
     p_hi = 1.5 * max(p_sat.values())
     grid = [np.geomspace(p_lo, p_hi, log_levels)]
     for m in stages:
@@ -386,10 +375,7 @@ def run_ptc(
     spatial_bright = {m: _pass(p50[m], m, n_spatial, (m,))[m] for m in st}
 
     k_cfg = sensor.conversion_gain_dn_per_e
-    mu_d = sensor.dark_current_e_s * t_int_s
-    sigma_d_px_e = math.sqrt(
-        (sensor.read_noise_e**2 if sensor.read_noise else 0.0) + (mu_d if sensor.dark_noise else 0.0)
-    )
+    sigma_d_px_e = dark_noise_e(sensor, t_int_s)
     results: dict[int, dict[str, Any]] = {}
     for m in st:
         # quantisation noise of the stage: m pixel ADC roundings, or one of the output word

@@ -120,6 +120,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
     from bench_sim.metrics.histogram import evaluate_eq18
     from bench_sim.render.exposures import iter_photon_frames, prepare
+    from bench_sim.sensor.model import stage_offset_dn
     from bench_sim.sensor.pipeline import sensor_dtdi_pass
 
     out = Path(out)
@@ -157,17 +158,22 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         pass_s = time.perf_counter() - t0
     timer.add("sensor_dtdi", max(pass_s - timer.steps.get("render_frames", 0.0), 0.0))
     g1, g2 = stage_images[mu1], stage_images[mu2]
+    # the stage words carry the pedestal (dtdi.pedestal_dn, + m*black unless subtracted): every
+    # consumer subtracts it; s1, s2 are the stage signals [DN]
+    off1, off2 = (stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2))
+    s1, s2 = g1 - off1, g2 - off2
 
     # 3. fusion and display transform
     t0 = time.perf_counter()
-    fused = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta)
+    fused = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=(off1, off2))
     tra01 = tone_map(fused.hdr, cfg.fusion.tra, full_scale_dn=fused.full_scale_dn)
     tra8 = quantize_display(tra01, 8)
     timer.add("fusion", time.perf_counter() - t0)
 
     # 4. metrics
     t0 = time.perf_counter()
-    eq18 = evaluate_eq18(g1, g2, fused.hdr, mu1=mu1, mu2=mu2, beta=beta)
+    # eq. 16-17 count the values of the stored words; the HDR carries Gamma2's offset likewise
+    eq18 = evaluate_eq18(g1, g2, fused.hdr + off2, mu1=mu1, mu2=mu2, beta=beta)
     clip = 2**beta - 1
     dr = measure_dynamic_range(
         cfg.sensor, cfg.dtdi, t_int, mu1, mu2, rng, **({"n_levels": 24} if quick else {})
@@ -179,7 +185,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     refl = {p.name: p.reflectance for p in panel.patches}
     darkest = min(right, key=refl.__getitem__)
     brightest = max(left, key=refl.__getitem__)
-    images = {"gamma1": g1, "gamma2": g2, "gamma_hdr": fused.hdr}
+    images = {"gamma1": s1, "gamma2": s2, "gamma_hdr": fused.hdr}
     snr_dark = {k: _spatial_snr(v, right[darkest]) for k, v in images.items()}
     sat = {
         "gamma1": float(np.mean(g1 >= clip)),
@@ -190,12 +196,20 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     bright = {
         "patch": brightest,
         "reflectance": refl[brightest],
-        "gamma1_mean_dn": float(g1[bsl].mean()),
-        "gamma1_fraction_of_phi_fs": float(g1[bsl].mean() / 2**beta),
+        "gamma1_mean_dn": float(s1[bsl].mean()),
+        "gamma1_fraction_of_phi_fs": float(s1[bsl].mean() / 2**beta),
         "gamma2_saturated_fraction": float(np.mean(g2[bsl] >= clip)),
         "gamma_hdr_saturated_fraction": float(np.mean(fused.saturated[bsl])),
     }
-    dark = {"patch": darkest, "reflectance": refl[darkest], "snr": snr_dark}
+    dark = {
+        "patch": darkest,
+        "reflectance": refl[darkest],
+        "snr": snr_dark,
+        # pixels of the patch stored as 0 DN (clipped by the word): 0 with a pedestal above the noise
+        "word_zero_fraction": {
+            k: float(np.mean(v[right[darkest]] <= 0)) for k, v in (("gamma1", g1), ("gamma2", g2))
+        },
+    }
     # "in the noise": below SNR 2; "out of the noise": the Rose criterion, SNR >= 3
     qualitative = {
         "stage_mu2_saturates_bright_region": bright["gamma2_saturated_fraction"] > 0.99,
@@ -216,6 +230,8 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         "mu2": mu2,
         "beta": beta,
         "phi_fs_dn": 2**beta,
+        "pedestal_dn": cfg.dtdi.pedestal_dn,
+        "stage_offset_dn": {"gamma1": off1, "gamma2": off2},
         "lines": lines,
         "columns": cfg.sensor.columns,
         "rows": rows,

@@ -14,8 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from bench_sim.config import BETA_BITS_MAX as BETA_MAX
+from bench_sim.config import BETA_BITS_MIN as BETA_MIN
 from bench_sim.errors import BenchSimError
-from bench_sim.sensor.dtdi import full_scale_dn as dtdi_full_scale_dn
+from bench_sim.sensor.model import check_beta_bits
+from bench_sim.sensor.model import full_scale_dn as _word_full_scale_dn
 
 __all__ = [
     "FusionResult",
@@ -28,10 +31,6 @@ __all__ = [
     "as_stage_image",
     "as_stage_stack",
 ]
-
-BETA_MIN = 1
-BETA_MAX = 32
-
 
 @dataclass(frozen=True)
 class FusionResult:
@@ -66,23 +65,20 @@ class FusionResult:
 
 
 def check_beta(beta: int) -> int:
-    """Validate the output word length ``beta`` [bits] (``BETA_MIN .. BETA_MAX``)."""
-    if isinstance(beta, bool) or not isinstance(beta, int | np.integer):
-        raise BenchSimError(f"beta = {beta!r}: must be an integer number of bits in {BETA_MIN}..{BETA_MAX}")
-    if not BETA_MIN <= int(beta) <= BETA_MAX:
-        raise BenchSimError(f"beta = {beta}: must lie in {BETA_MIN}..{BETA_MAX} bits")
-    return int(beta)
+    """Validate the output word length ``beta`` [bits] (``BETA_MIN .. BETA_MAX``); the one
+    validator, :func:`bench_sim.sensor.model.check_beta_bits`."""
+    return check_beta_bits(beta, "beta")
 
 
-def full_scale_dn(beta: int) -> float:
-    """``Phi_FS = 2**beta`` [DN], the full-scale value of a ``beta``-bit output word (paper eq. 4),
-    as the DTDI stage defines it, for a validated ``beta``."""
-    return float(dtdi_full_scale_dn(check_beta(beta)))
+def full_scale_dn(beta: int) -> int:
+    """``Phi_FS = 2**beta`` [DN] (paper eq. 4) of :func:`bench_sim.sensor.model.full_scale_dn`,
+    with ``beta`` validated under the fusion's name for it."""
+    return _word_full_scale_dn(check_beta(beta))
 
 
 def clip_value_dn(beta: int) -> float:
     """Largest storable value of a ``beta``-bit word, ``2**beta - 1`` [DN]."""
-    return full_scale_dn(beta) - 1.0
+    return float(full_scale_dn(beta) - 1)
 
 
 def check_stage_pair(mu1: int, mu2: int) -> tuple[int, int]:

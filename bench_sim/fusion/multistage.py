@@ -9,7 +9,8 @@ Both functions take a mapping ``{stage m: stage image [DN]}`` and return a
 
 ``fuse_stages_inverse_variance``
     Inverse-variance weighted mean of all unsaturated stages, with the variance of a stage-``m``
-    value from ``m`` independent reads (EMVA 1288 linear model, quantisation per read)::
+    value from ``m`` independent reads (EMVA 1288 linear model, quantisation per read;
+    :func:`bench_sim.sensor.model.stage_variance_dn2`)::
 
         var_m = m * (K**2 * (sigma_d**2 + mu_e) + 1/12)        [DN^2]
 
@@ -23,6 +24,12 @@ Both functions take a mapping ``{stage m: stage image [DN]}`` and return a
       Stages from one DTDI pass are nested sums of the same reads (``cov = min(m_i, m_j) * v``);
       for them the best linear unbiased estimate is the highest unsaturated stage alone, i.e.
       ``fuse_stages_highest_unsaturated(..., criterion="clip")``.
+
+References
+----------
+EMVA Standard 1288, Release 4.0 Linear (2021), eq. 7 (the per-read variance). Inverse-variance
+weighting of differently exposed images: P. E. Debevec and J. Malik, "Recovering High Dynamic
+Range Radiance Maps from Photographs", SIGGRAPH 1997 (weighted merge of exposures).
 """
 
 from __future__ import annotations
@@ -40,6 +47,10 @@ from bench_sim.fusion.common import (
     clip_value_dn,
     full_scale_dn,
 )
+from bench_sim.sensor.model import stage_variance_dn2
+
+#: The stage variance of :func:`bench_sim.sensor.model.stage_variance_dn2` (one closed form).
+stage_read_variance_dn2 = stage_variance_dn2
 
 __all__ = [
     "fuse_stages_highest_unsaturated",
@@ -131,38 +142,6 @@ def fuse_stages_highest_unsaturated(
     )
 
 
-def stage_read_variance_dn2(
-    stage: int,
-    mean_e_per_read: ArrayLike,
-    *,
-    conversion_gain_dn_per_e: float,
-    dark_noise_e: float,
-    quantization: bool = True,
-) -> NDArray[np.float64]:
-    """Temporal variance of a stage-``m`` DTDI value from ``m`` independent reads [DN^2].
-
-    ``var_m = m * (K**2 * (sigma_d**2 + mu_e) + 1/12)`` (EMVA 1288 linear model: dark noise
-    ``sigma_d`` [e-], Poisson shot noise of ``mu_e`` [e-], ADC quantisation ``1/12`` DN^2 per read).
-
-    Parameters
-    ----------
-    stage
-        Number of summed reads ``m``.
-    mean_e_per_read
-        Mean signal electrons per read ``mu_e`` [e-] (negative values are treated as 0).
-    conversion_gain_dn_per_e
-        ``K`` [DN/e-].
-    dark_noise_e
-        ``sigma_d`` [e-]: read noise and dark-current shot noise per read.
-    quantization
-        Include the ``1/12`` DN^2 quantisation term.
-    """
-    mu_e = np.maximum(np.asarray(mean_e_per_read, dtype=np.float64), 0.0)
-    k2 = conversion_gain_dn_per_e**2
-    q = 1.0 / 12.0 if quantization else 0.0
-    return stage * (k2 * (dark_noise_e**2 + mu_e) + q)
-
-
 def fuse_stages_inverse_variance(
     stages: Mapping[int, ArrayLike],
     *,
@@ -175,8 +154,9 @@ def fuse_stages_inverse_variance(
     """Noise-optimal (inverse-variance) merge of stage images, saturated samples excluded.
 
     Each unsaturated stage gives an estimate ``x_k = gamma_k * m_K / m_k`` [DN, stage-``m_K``
-    units] with variance ``(m_K / m_k)**2 * var_{m_k}`` (:func:`stage_read_variance_dn2`); the
-    result is ``sum(w_k x_k) / sum(w_k)`` with ``w_k = 1 / var(x_k)``. ``mu_e`` per read is
+    units] with variance ``(m_K / m_k)**2 * var_{m_k}``
+    (:func:`~bench_sim.sensor.model.stage_variance_dn2`); the result is ``sum(w_k x_k) / sum(w_k)``
+    with ``w_k = 1 / var(x_k)``. ``mu_e`` per read is
     estimated from the highest unsaturated stage, ``gamma_k / (m_k K)``. See the module notes on
     independent versus nested (same-pass) stages.
 
@@ -222,7 +202,7 @@ def fuse_stages_inverse_variance(
     var_x = np.stack(
         [
             (top / m) ** 2
-            * stage_read_variance_dn2(
+            * stage_variance_dn2(
                 m,
                 mu_e,
                 conversion_gain_dn_per_e=conversion_gain_dn_per_e,

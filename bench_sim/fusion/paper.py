@@ -17,6 +17,11 @@ Note (not hidden): ``Phi_FS = 2**beta`` is one more than the largest storable va
 ``Phi_FS``, which the word clips to ``2**beta - 1``; eq. 11 still takes ``gamma2`` there, so the
 fused response has a step of about one stage-``mu1`` DN (``mu2/mu1`` output DN) at the threshold.
 With noise, pixels just below the threshold can also carry a clipped ``gamma2``.
+
+References
+----------
+An HDR Imaging Method With DTDI Technology for Push-Broom Cameras (the reproduced paper),
+eq. 4-11.
 """
 
 from __future__ import annotations
@@ -62,7 +67,7 @@ def fuse_dtdi_hdr_eq11(
     mu1: int,
     mu2: int,
     beta: int,
-    pedestal_dn: float = 0.0,
+    pedestal_dn: float | tuple[float, float] = 0.0,
 ) -> FusionResult:
     """Fuse two DTDI stage images with the paper's rule (eq. 11).
 
@@ -77,10 +82,12 @@ def fuse_dtdi_hdr_eq11(
     beta
         Output word length [bits], ``Phi_FS = 2**beta`` (eq. 4).
     pedestal_dn
-        Constant offset [DN] carried by both stage words (a DTDI pedestal that keeps the dark
-        signal above 0, as the photon-transfer measurement uses). It is removed from both images
-        first, and the signal range of the word shrinks to ``Phi_FS - pedestal``, so the
-        threshold becomes ``(Phi_FS - pedestal) / (mu2 / mu1)``. ``0`` (default) is exactly the
+        Offset [DN] the stage words carry besides the signal (the DTDI pedestal ``dtdi.pedestal_dn``
+        that keeps the dark signal above 0, plus ``m * black`` when the black offset is not
+        subtracted; :func:`bench_sim.sensor.model.stage_offset_dn`): one value for both, or
+        ``(P1, P2)``. It is removed from the images first, and the signal range of the words
+        shrinks to ``Phi_FS - P``, so the threshold becomes ``(Phi_FS - P2) / (mu2 / mu1)``
+        (``Gamma2``'s signal range decides when it clips). ``0`` (default) is exactly the
         paper's eq. 11.
 
     Returns
@@ -89,7 +96,7 @@ def fuse_dtdi_hdr_eq11(
         ``hdr`` = ``gamma_HDR`` [DN, stage-``mu2`` units, float64, pedestal removed]; ``source`` =
         ``mu2`` where the pixel is ``gamma2`` (eq. 10), ``mu1`` where it is
         ``(mu2/mu1) * gamma1`` (eq. 8); ``saturated`` where ``gamma1`` is at the clip value
-        ``2**beta - 1``; ``full_scale_dn = (mu2/mu1) * (2**beta - 1 - pedestal)``.
+        ``2**beta - 1``; ``full_scale_dn = (mu2/mu1) * (2**beta - 1 - P1)``.
 
     Raises
     ------
@@ -103,18 +110,24 @@ def fuse_dtdi_hdr_eq11(
     if g1.shape != g2.shape:
         raise BenchSimError(f"gamma1 shape {g1.shape} differs from gamma2 shape {g2.shape}")
     clip = clip_value_dn(beta)
-    if not 0.0 <= pedestal_dn < clip:
-        raise BenchSimError(f"pedestal_dn = {pedestal_dn}: must lie in 0..{clip:g} (below the word clip)")
-    s1 = g1 - pedestal_dn if pedestal_dn else g1
-    s2 = g2 - pedestal_dn if pedestal_dn else g2
+    p1, p2 = (
+        (float(pedestal_dn), float(pedestal_dn))
+        if np.ndim(pedestal_dn) == 0
+        else (float(pedestal_dn[0]), float(pedestal_dn[1]))  # type: ignore[index]
+    )
+    for p in (p1, p2):
+        if not 0.0 <= p < clip:
+            raise BenchSimError(f"pedestal_dn = {p:g}: must lie in 0..{clip:g} (below the word clip)")
+    s1 = g1 - p1 if p1 else g1
+    s2 = g2 - p2 if p2 else g2
     # eq. 5: gamma1 > Phi_FS / (mu2/mu1), as a product: exact for integer DN
-    use_low = s1 * mu2 > (phi_fs - pedestal_dn) * mu1
+    use_low = s1 * mu2 > (phi_fs - p2) * mu1
     hdr = np.where(use_low, s1 * mu2 / mu1, s2)  # eq. 8 / eq. 10
     source = np.where(use_low, np.int32(mu1), np.int32(mu2)).astype(np.int32)
     return FusionResult(
         hdr=hdr,
         source=source,
         unit_stage=mu2,
-        full_scale_dn=(clip - pedestal_dn) * mu2 / mu1,
+        full_scale_dn=(clip - p1) * mu2 / mu1,
         saturated=g1 >= clip,
     )

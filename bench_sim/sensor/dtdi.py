@@ -33,9 +33,12 @@ The stored stage value is an integer word of ``beta_bits`` bits: ``Phi_FS = 2**b
 with ``b`` the black offset [DN]: subtracted from every row before the sum (so it does not
 accumulate), or left in, in which case stage ``m`` carries ``m * b``. Rounding only matters for
 non-integer input (the sensor's ``quantization`` switched off) or a non-integer black offset.
-``pedestal`` (default 0; one value, or one per stage) is a constant added after the sum; the
-photon-transfer measurement uses it to keep the dark signal above 0 (EMVA 1288 requires an
-unclipped dark signal). The sum is
+``pedestal`` (one value, or one per stage) is a constant added after the sum and kept in the
+word: the configured ``dtdi.pedestal_dn`` (default 64 DN, the default of
+:func:`bench_sim.sensor.pipeline.sensor_dtdi_pass`; the low-level functions here default to 0,
+the paper's plain word). It keeps the dark signal's noise above 0 DN, so the word does not clip
+it and dark statistics stay unbiased (EMVA 1288 also requires an unclipped dark signal); every
+consumer subtracts it (:func:`bench_sim.sensor.model.stage_offset_dn`). The sum is
 formed in float64, exact for integer DN (``2**53`` is far above any sum of 16-bit rows), so the
 order of summation does not matter and the streaming and direct forms agree bit for bit.
 
@@ -50,14 +53,19 @@ columns, ``O(M * N)``, independent of the number of lines.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from bench_sim.config import SensorConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.sensor.emva import QUANTIZATION_VAR_DN2, pixel_mean_var_dn
+from bench_sim.sensor.model import (
+    check_beta_bits,
+    full_scale_dn,
+    stage_dark_std_dn,
+    stage_mean_var_dn,
+    stage_offset_dn,
+    word_clip_dn,
+)
 
 __all__ = [
     "DTDIAccumulator",
@@ -71,12 +79,8 @@ __all__ = [
     "stage_pedestals",
     "stage_mean_var_dn",
     "stage_dark_std_dn",
+    "stage_offset_dn",
 ]
-
-
-def full_scale_dn(beta_bits: int) -> int:
-    """``Phi_FS = 2**beta`` [DN] (paper eq. 4); the largest stored value is ``Phi_FS - 1``."""
-    return 1 << int(beta_bits)
 
 
 def complete_lines(n_frames: int, stage: int) -> int:
@@ -121,13 +125,6 @@ def stage_pedestals(pedestal_dn: Pedestal, stages: Sequence[int]) -> dict[int, f
     return out
 
 
-def _check_beta(beta_bits: int) -> int:
-    beta = int(beta_bits)
-    if not 1 <= beta <= 32:
-        raise BenchSimError(f"beta_bits = {beta_bits!r}: must lie in 1..32")
-    return beta
-
-
 def _finish(
     sums: np.ndarray, stage: int, beta_bits: int, black_offset_dn: float, subtract_black: bool,
     pedestal_dn: float,
@@ -136,7 +133,7 @@ def _finish(
     shift = float(pedestal_dn) - (stage * float(black_offset_dn) if subtract_black else 0.0)
     val = sums + shift if shift != 0.0 else sums.copy()
     np.rint(val, out=val)
-    np.clip(val, 0.0, float(full_scale_dn(beta_bits) - 1), out=val)
+    np.clip(val, 0.0, float(word_clip_dn(beta_bits)), out=val)
     return val.astype(np.uint32)
 
 
@@ -181,7 +178,7 @@ def dtdi_direct(
     if v.ndim != 3:
         raise BenchSimError(f"frames_dn shape {v.shape}: expected (frames, rows, columns)")
     n_frames, rows, _ = v.shape
-    beta = _check_beta(beta_bits)
+    beta = check_beta_bits(beta_bits)
     st = validate_stages(stages, rows)
     if lines is not None and n_frames < frames_needed(lines, st):
         raise BenchSimError(
@@ -234,7 +231,7 @@ class DTDIAccumulator:
             raise BenchSimError(f"n_columns = {n_columns!r}: must be >= 1")
         self.n_columns = int(n_columns)
         self.stages = validate_stages(stages)
-        self.beta_bits = _check_beta(beta_bits)
+        self.beta_bits = check_beta_bits(beta_bits)
         self.black_offset_dn = float(black_offset_dn)
         self.subtract_black = bool(subtract_black)
         self.pedestal_dn = stage_pedestals(pedestal_dn, self.stages)
@@ -402,56 +399,3 @@ def collect_stage_lines(
         m: (np.concatenate(b) if b else np.zeros((0, n_columns), dtype=np.uint32))
         for m, b in kept_blocks.items()
     }
-
-
-def stage_dark_std_dn(sensor: SensorConfig, t_int_s: float, stage: int) -> float:
-    """Model spread [DN] of the dark value of stage ``m`` over pixels and time.
-
-    ``sigma^2 = m sigma_y.dark^2 + m (K dsnu t)^2 + (m col)^2``: the temporal dark noise of
-    ``m`` independent reads (:func:`bench_sim.sensor.emva.pixel_mean_var_dn` at 0 photons) and
-    the DSNU of ``m`` pixels add incoherently; the column amplifier offset is the same in all
-    ``m`` rows of a column, so it adds coherently. Switched-off sources drop out.
-    """
-    m = int(stage)
-    temporal = m * float(pixel_mean_var_dn(0.0, sensor, t_int_s)[1])
-    k = sensor.conversion_gain_dn_per_e
-    dsnu = m * (k * sensor.dsnu_e_s * t_int_s) ** 2 if sensor.dsnu_enabled else 0.0
-    col = (m * sensor.column_offset_dn) ** 2 if sensor.column_fpn else 0.0
-    return math.sqrt(temporal + dsnu + col)
-
-
-def stage_mean_var_dn(
-    photons: np.ndarray | float,
-    sensor: SensorConfig,
-    t_int_s: float,
-    stage: int,
-    *,
-    subtract_black: bool = True,
-    pedestal_dn: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Closed-form mean [DN] and temporal variance [DN^2] of a stage-``m`` value (linear range).
-
-    The stage sums ``m`` independent pixel reads of the same scene line (eq. 1-2), each with
-    the EMVA linear model of :func:`bench_sim.sensor.emva.pixel_mean_var_dn`:
-    ``mean = m * (mu_y - b * subtract_black) + pedestal`` and ``var = m * sigma_y**2``; without
-    the sensor's quantisation the output word still rounds once (``+ 1/12``).
-    Valid below pixel and word saturation and above 0 DN; fixed patterns averaged out.
-
-    Parameters
-    ----------
-    photons
-        Mean photons per pixel per frame ``mu_p`` (scalar or array).
-    sensor
-        Pixel model.
-    t_int_s
-        Integration time of one frame [s].
-    stage
-        ``m``.
-    subtract_black, pedestal_dn
-        As in :func:`dtdi_direct`.
-    """
-    mean_px, var_px = pixel_mean_var_dn(photons, sensor, t_int_s)
-    m = int(stage)
-    mean = m * (mean_px - (sensor.black_offset_dn if subtract_black else 0.0)) + float(pedestal_dn)
-    var = m * var_px + (0.0 if sensor.quantization else QUANTIZATION_VAR_DN2)
-    return mean, var

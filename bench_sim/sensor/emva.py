@@ -25,6 +25,14 @@ means), ``dark_noise`` (shot noise of the dark current), ``read_noise``, ``prnu_
 ``dsnu_enabled``, ``column_fpn`` and ``quantization``. With ``quantization`` off the ADC keeps
 its range (clip at ``0`` and ``2**adc_bits - 1``) but does not round, and :func:`expose` returns
 ``float64`` instead of ``uint16``.
+
+The closed forms of this model (expected mean and variance, saturation) live in
+:mod:`bench_sim.sensor.model` (re-exported here).
+
+References
+----------
+EMVA Standard 1288, Release 4.0 Linear, European Machine Vision Association, 2021 (section 2,
+eq. 1-8).
 """
 
 from __future__ import annotations
@@ -35,6 +43,7 @@ import numpy as np
 
 from bench_sim.config import SensorConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.sensor.model import QUANTIZATION_VAR_DN2, pixel_mean_var_dn, pixel_saturation_dn
 
 __all__ = [
     "FixedPattern",
@@ -44,11 +53,6 @@ __all__ = [
     "pixel_saturation_dn",
     "QUANTIZATION_VAR_DN2",
 ]
-
-#: Variance of the uniform quantisation error of an ideal ADC, ``sigma_q**2 = 1/12`` DN^2
-#: (EMVA 1288 R4, eq. 8).
-QUANTIZATION_VAR_DN2 = 1.0 / 12.0
-
 
 def _readonly(arr: np.ndarray) -> np.ndarray:
     arr = np.ascontiguousarray(arr)
@@ -147,11 +151,6 @@ def draw_fixed_pattern(sensor: SensorConfig, rng: np.random.Generator) -> FixedP
     return FixedPattern(prnu_gain=gain, dark_current_e_s=dark, column_offset_dn=col)
 
 
-def pixel_saturation_dn(sensor: SensorConfig) -> int:
-    """Largest raw pixel value: ``2**adc_bits - 1`` [DN]."""
-    return (1 << sensor.adc_bits) - 1
-
-
 def expose(
     photons: np.ndarray,
     sensor: SensorConfig,
@@ -224,49 +223,3 @@ def expose(
         return dn.astype(np.uint16)
     np.clip(dn, 0.0, top, out=dn)
     return dn
-
-
-def pixel_mean_var_dn(
-    photons: np.ndarray | float, sensor: SensorConfig, t_int_s: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Closed-form mean and temporal variance of a pixel's raw value [DN] (EMVA linear model).
-
-    ``mu_y = K * (eta * mu_p + mu_d) + black`` (EMVA 1288 R4 eq. 5 with the dark signal
-    ``mu_y.dark = K * mu_d + black``) and
-    ``sigma_y**2 = K**2 * (sigma_d**2 + eta * mu_p) + sigma_q**2`` (eq. 7), with
-    ``sigma_d**2 = read_noise_e**2 + mu_d`` (read noise plus dark-current shot noise),
-    ``mu_d = dark_current_e_s * t_int_s`` and ``sigma_q**2 = 1/12`` DN^2.
-
-    Switched-off sources drop out of the variance (``sigma_q**2 = 0`` without quantization).
-    The fixed patterns are averaged out (PRNU gain 1, column offset 0, mean dark current),
-    and the model holds only in the linear range: well below full well and ``2**adc_bits - 1``
-    and several sigma above 0 DN.
-
-    Parameters
-    ----------
-    photons
-        Mean photons per pixel per frame ``mu_p`` (scalar or array).
-    sensor
-        Pixel model.
-    t_int_s
-        Integration time of one frame [s].
-
-    Returns
-    -------
-    (mean_dn, var_dn)
-        Arrays of the shape of ``photons``: mean [DN] and temporal variance [DN^2].
-    """
-    p = np.asarray(photons, dtype=np.float64)
-    k = sensor.conversion_gain_dn_per_e
-    mu_d = sensor.dark_current_e_s * t_int_s
-    mu_e = sensor.quantum_efficiency * p
-    mean = k * (mu_e + mu_d) + sensor.black_offset_dn
-    var_e = np.zeros_like(p)
-    if sensor.shot_noise:
-        var_e = var_e + mu_e
-    if sensor.dark_noise:
-        var_e = var_e + mu_d
-    if sensor.read_noise:
-        var_e = var_e + sensor.read_noise_e**2
-    var = k**2 * var_e + (QUANTIZATION_VAR_DN2 if sensor.quantization else 0.0)
-    return mean, var

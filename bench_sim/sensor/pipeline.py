@@ -63,7 +63,7 @@ def iter_sensor_dtdi(
     rng: np.random.Generator,
     *,
     fixed: FixedPattern | None = None,
-    pedestal_dn: float | Mapping[int, float] = 0.0,
+    pedestal_dn: float | Mapping[int, float] | None = None,
     chunk_frames: int = DEFAULT_CHUNK_FRAMES,
 ) -> Iterator[dict[int, np.ndarray]]:
     """Stream a pass: expose each chunk of frames and yield the stage lines it completed.
@@ -97,7 +97,7 @@ def iter_sensor_dtdi(
             fp = fixed if (rows, cols) == fixed.shape else fixed.window(rows, cols)
             acc = DTDIAccumulator(
                 cols, st, dtdi.beta_bits, sensor.black_offset_dn, dtdi.subtract_black,
-                pedestal_dn=pedestal_dn,
+                pedestal_dn=dtdi.pedestal_dn if pedestal_dn is None else pedestal_dn,
             )
         yield acc.push_many(expose(chunk, sensor, fp, t_int_s, rng))
     if acc is None:
@@ -114,7 +114,7 @@ def sensor_dtdi_pass(
     *,
     fixed: FixedPattern | None = None,
     lines: int | None = None,
-    pedestal_dn: float | Mapping[int, float] = 0.0,
+    pedestal_dn: float | Mapping[int, float] | None = None,
     chunk_frames: int = DEFAULT_CHUNK_FRAMES,
 ) -> dict[int, np.ndarray]:
     """Expose frames of photons and accumulate every requested DTDI stage in one pass.
@@ -142,7 +142,7 @@ def sensor_dtdi_pass(
         ``0 .. L-1`` for every stage (needs ``K >= L + max(stages) - 1`` frames).
     pedestal_dn
         Constant added to every stage value [DN], one value or stage -> value (see
-        :mod:`bench_sim.sensor.dtdi`).
+        :mod:`bench_sim.sensor.dtdi`); default (``None``): the config's ``dtdi.pedestal_dn``.
     chunk_frames
         Frames per vectorised :func:`expose` call. The temporal noise drawn depends on it
         (frames are re-chunked to it whatever the input's chunking): keep it fixed.
