@@ -15,7 +15,7 @@ from typing import Annotated, Any
 
 import typer
 
-from bench_sim.config import DEFAULT_CONFIG_PATH
+from bench_sim.config import DEFAULT_CONFIG_PATH, TRA_METHODS
 from bench_sim.errors import BenchSimError
 
 app = typer.Typer(
@@ -136,13 +136,24 @@ def fuse(
     out: Annotated[Path, typer.Option("--out", help="HDR output (.exr)")] = Path("hdr.exr"),
     tra: Annotated[Path | None, typer.Option("--tra", help="also write Gamma_TRA (.png)")] = None,
     tra_method: Annotated[
-        str, typer.Option("--tra-method", help="log | gamma | histeq | reinhard | drago | mantiuk")
+        str, typer.Option("--tra-method", help=" | ".join(TRA_METHODS))
     ] = "log",
+    pedestal: Annotated[
+        float,
+        typer.Option(
+            "--pedestal",
+            help="offset [DN] the stage words carry (dtdi.pedestal_dn: 64 for bench_sim's images; "
+            "0 for a plain word), subtracted before eq. 11",
+        ),
+    ] = 0.0,
 ) -> None:
     """Fuse two stage images with the paper's rule (eq. 11)."""
     from bench_sim.experiments.fuse_files import fuse_files
 
-    fuse_files(low, high, mu1=mu1, mu2=mu2, beta=beta, out=out, tra=tra, tra_method=tra_method)
+    fuse_files(
+        low, high, mu1=mu1, mu2=mu2, beta=beta, out=out, tra=tra, tra_method=tra_method,
+        pedestal_dn=pedestal,
+    )
 
 
 @app.command()

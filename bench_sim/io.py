@@ -1,4 +1,10 @@
-"""File input/output with metadata: atomic writes, EXR, TIFF, PNG, NPY and JSON.
+"""File input/output with metadata: atomic writes, EXR, TIFF, PNG, NPY, JSON, CSV, text and
+EMVA 1288 descriptor files.
+
+Every file carries its provenance in one format (the dict of
+:func:`bench_sim.experiments.provenance.provenance`: ``version``, ``seed``, ``config_sha256``,
+``config``): as a JSON attribute (EXR header, TIFF ImageDescription, PNG ``tEXt`` chunk
+``bench_sim``), as ``#`` comment lines (CSV, EMVA descriptors), or as keys (JSON).
 
 Every writer goes through :func:`atomic_path`: the file is written under a temporary name in the
 destination folder and renamed into place only when complete, so a failure never leaves a
@@ -32,6 +38,11 @@ __all__ = [
     "read_exr",
     "write_tiff16",
     "write_png",
+    "write_figure_png",
+    "read_png_text",
+    "write_text",
+    "write_csv",
+    "write_emva_descriptor",
     "read_image",
     "sha256_text",
     "ImageReadError",
@@ -264,33 +275,133 @@ def write_tiff16(
     return Path(path)
 
 
+def _png_info(metadata: Mapping[str, Any] | None) -> Any:
+    from PIL import PngImagePlugin
+
+    info = PngImagePlugin.PngInfo()
+    if metadata is not None:
+        info.add_text("bench_sim", json.dumps(metadata, sort_keys=True, default=_json_default))
+    return info
+
+
 def write_png(
     path: str | os.PathLike[str], image: np.ndarray, metadata: Mapping[str, Any] | None = None
 ) -> Path:
-    """Write an 8- or 16-bit grayscale (2-D) or RGB (H, W, 3) PNG; metadata as a text chunk."""
-    import imageio.v3 as iio
+    """Write an 8- or 16-bit grayscale (2-D) or 8-bit RGB (H, W, 3) PNG (Pillow); ``metadata``
+    as JSON in the ``tEXt`` chunk ``bench_sim`` (Pillow's ``PngInfo``)."""
+    from PIL import Image
 
     arr = np.asarray(image)
     if arr.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"{path}: PNG needs uint8 or uint16 data, got {arr.dtype}")
+    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] == 3 and arr.dtype == np.uint8)):
+        raise ValueError(f"{path}: PNG needs a 2-D image or 8-bit (H, W, 3) RGB, got {arr.shape} {arr.dtype}")
+    img = Image.fromarray(np.ascontiguousarray(arr))
     with atomic_path(path) as tmp:
-        iio.imwrite(tmp, arr, extension=".png")
-        if metadata is not None:
-            _png_add_text(tmp, "bench_sim", json.dumps(metadata, sort_keys=True, default=_json_default))
+        img.save(tmp, format="PNG", pnginfo=_png_info(metadata))
     return Path(path)
 
 
-def _png_add_text(path: Path, key: str, text: str) -> None:
-    """Insert a tEXt chunk after IHDR of an existing PNG file."""
-    import struct
-    import zlib
+def write_figure_png(
+    path: str | os.PathLike[str], fig: Any, metadata: Mapping[str, Any] | None = None, dpi: float = 110
+) -> Path:
+    """Render a matplotlib figure to PNG with the ``bench_sim`` text chunk (Pillow ``PngInfo``)
+    and close it."""
+    import io as _io
 
-    data = path.read_bytes()
-    ihdr_end = 8 + 8 + 13 + 4
-    payload = key.encode("latin-1") + b"\x00" + text.encode("latin-1", "replace")
-    chunk = struct.pack(">I", len(payload)) + b"tEXt" + payload
-    chunk += struct.pack(">I", zlib.crc32(b"tEXt" + payload) & 0xFFFFFFFF)
-    path.write_bytes(data[:ihdr_end] + chunk + data[ihdr_end:])
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    buf.seek(0)
+    with Image.open(buf) as img, atomic_path(path) as tmp:
+        img.save(tmp, format="PNG", pnginfo=_png_info(metadata))
+    return Path(path)
+
+
+def read_png_text(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The ``bench_sim`` metadata of a PNG written by :func:`write_png` (``{}`` if none)."""
+    from PIL import Image
+
+    with Image.open(path) as img:
+        text = getattr(img, "text", {}).get("bench_sim")
+    return json.loads(text) if text else {}
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write a text file atomically (UTF-8)."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
+
+
+def _comment_lines(metadata: Mapping[str, Any] | None) -> list[str]:
+    """Provenance as ``#`` lines: ``# version ... seed ... config_sha256 ...`` and the JSON."""
+    if not metadata:
+        return []
+    head = " ".join(f"{k} {metadata[k]}" for k in ("version", "seed", "config_sha256") if k in metadata)
+    return [f"# bench_sim {head}".rstrip(), "# provenance: " + json.dumps(
+        metadata, sort_keys=True, default=_json_default
+    )]
+
+
+def write_csv(
+    path: str | os.PathLike[str],
+    header: list[str],
+    rows: list[list[Any]],
+    metadata: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write a CSV table: provenance ``#`` lines, the header, the rows (floats to 10 digits).
+
+    Readers: ``pandas.read_csv(path, comment="#")``.
+    """
+    import csv
+    import io as _io
+
+    buf = _io.StringIO()
+    buf.writelines(line + "\n" for line in _comment_lines(metadata))
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for r in rows:
+        w.writerow([f"{v:.10g}" if isinstance(v, float) else v for v in r])
+    return write_text(path, buf.getvalue())
+
+
+def write_emva_descriptor(
+    path: str | os.PathLike[str],
+    *,
+    bits: int,
+    width: int,
+    height: int,
+    bright: list[tuple[float, float, list[str]]],
+    dark: list[tuple[float, list[str]]],
+    title: str = "",
+    metadata: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write an EMVA 1288 descriptor file (the format the ``emva1288`` reference package reads).
+
+    Lines: ``v 4.0``, ``n bits width height``; per bright level ``b exposure_ns photons`` and per
+    dark level ``d exposure_ns``, each followed by its ``i path`` lines (2 images: a temporal
+    pair; more: a spatial stack). Comment lines (``#``) carry ``title`` and the provenance.
+
+    Parameters
+    ----------
+    bright
+        ``(exposure_ns, photons, image paths)`` per bright level (paths relative to the file).
+    dark
+        ``(exposure_ns, image paths)`` per dark level.
+    """
+    lines = ([f"# {title}"] if title else []) + _comment_lines(metadata)
+    lines += ["v 4.0", f"n {int(bits)} {int(width)} {int(height)}"]
+    for exposure_ns, photons, names in bright:
+        lines.append(f"b {exposure_ns:.3f} {photons:.9g}")
+        lines += [f"i {n}" for n in names]
+    for exposure_ns, names in dark:
+        lines.append(f"d {exposure_ns:.3f}")
+        lines += [f"i {n}" for n in names]
+    return write_text(path, "\n".join(lines) + "\n")
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:

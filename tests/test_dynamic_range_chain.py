@@ -1,153 +1,174 @@
-"""Measured DR through sensor -> DTDI -> eq. 11 fusion (must show 2 and 3)."""
+"""Measured DR through sensor -> DTDI -> eq. 11 fusion (bench_sim.experiments.chain_dr)."""
 
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import pytest
 
-from bench_sim.config import DTDIConfig, SensorConfig
-from bench_sim.experiments.dynamic_range import (
-    measure_dynamic_range,
-    photon_transfer_series,
-    ptc_offset_dn,
+from bench_sim.config import BenchConfig, with_overrides
+from bench_sim.experiments.chain_dr import ChainDR, measure_chain_dynamic_range
+from bench_sim.experiments.uniform_field import (
+    PEDESTAL_SIGMAS,
+    expose_uniform,
+    measurement_offsets_dn,
+    measurement_pedestal_dn,
 )
+from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.metrics.dynamic_range import dr_increase_eq15_db
+from bench_sim.sensor.emva import draw_fixed_pattern
+from bench_sim.sensor.model import stage_dark_std_dn, stage_saturation_photons
 
-T_INT_S = 100e-6
 MU1, MU2 = 10, 80
-SENSOR = SensorConfig(adc_bits=10)  # 10-bit pixels, the rest the paper rig's defaults
+CFG = BenchConfig()
+
+
+def _cfg(**dtdi: object) -> BenchConfig:
+    return with_overrides(CFG, {"dtdi": dtdi})
 
 
 @pytest.fixture(scope="module")
-def dr12() -> dict[str, Any]:
-    return measure_dynamic_range(
-        SENSOR, DTDIConfig(beta_bits=12), T_INT_S, MU1, MU2, np.random.default_rng(12)
-    )
+def dr12() -> ChainDR:
+    return measure_chain_dynamic_range(_cfg(beta_bits=12), 12)
 
 
 @pytest.fixture(scope="module")
-def dr16() -> dict[str, Any]:
-    return measure_dynamic_range(
-        SENSOR, DTDIConfig(beta_bits=16), T_INT_S, MU1, MU2, np.random.default_rng(16)
-    )
+def dr16() -> ChainDR:
+    return measure_chain_dynamic_range(_cfg(beta_bits=16), 16)
 
 
-def test_word_limited_gain_equals_eq15(dr12: dict[str, Any]) -> None:
-    """beta = 12: both stages clip at the output word, so the HDR gains 20 lg(mu2/mu1) over Gamma2."""
-    eq15 = dr_increase_eq15_db(MU1, MU2)
-    assert dr12["eq15_db"] == pytest.approx(eq15)
-    assert abs(dr12["delta_db_vs_gamma2"] - eq15) <= 0.3
-    # the dark end is Gamma2's: the HDR is gamma2 wherever gamma1 is below the threshold
-    img = dr12["images"]
-    assert img["hdr"]["photons_min"] == pytest.approx(img["gamma2"]["photons_min"])
-    # and the bright end Gamma1's (same clip of gamma1)
-    assert img["hdr"]["photons_sat"] == pytest.approx(img["gamma1"]["photons_sat"], rel=0.01)
-    # over Gamma1 the gain is at the dark end only: read noise grows as sqrt(m) in DTDI, so
-    # about 20 lg sqrt(mu2/mu1) = 9 dB, far less than eq. 15's 18 dB
-    assert 6.0 < dr12["delta_db_vs_gamma1"] < 12.0
+def test_word_limited_gain_over_gamma2_is_eq15_by_construction(dr12: ChainDR) -> None:
+    """beta = 12: both stages clip on the word, so HDR - Gamma2 is 20 lg(mu2/mu1) by
+    construction: the HDR is Gamma2 at the dark end (same SNR = 1 point) and Gamma1 x mu2/mu1 at
+    the bright end."""
+    assert dr12.gain_over_gamma2_by_construction
+    assert abs(dr12.gain_over_gamma2_db - dr_increase_eq15_db(MU1, MU2)) <= 0.3
+    img = dr12.images
+    assert img["hdr"].photons_min == pytest.approx(img["gamma2"].photons_min)
+    assert img["hdr"].photons_sat == pytest.approx(img["gamma1"].photons_sat, rel=0.02)
 
 
-def test_pixel_limited_gain_shrinks(dr16: dict[str, Any]) -> None:
-    """beta = 16 (observation): stage 10 tops out at pixel saturation, not at Phi_FS.
+def test_gain_over_gamma1_is_the_read_noise_ratio(dr12: ChainDR) -> None:
+    """Over Gamma1 the HDR gains only at the dark end: the read noise of the digital sum grows as
+    sqrt(m), so about 10 lg(mu2/mu1) = 9 dB, and it agrees with the sensor model's prediction."""
+    model_gain = dr12.model_dr_db["hdr"] - dr12.model_dr_db["gamma1"]
+    assert dr12.gain_over_gamma1_db == pytest.approx(model_gain, abs=0.5)
+    assert dr12.gain_over_gamma1_db == pytest.approx(10 * math.log10(MU2 / MU1), abs=1.0)
+    for name in ("gamma1", "gamma2", "hdr"):
+        # the model's clip is where the linear response meets the plateau (extrapolated point);
+        # EMVA's variance maximum lies a little below it
+        img = dr12.images[name]
+        assert img.dr_db_extrapolated == pytest.approx(dr12.model_dr_db[name], abs=0.3), name
+        assert dr12.model_dr_db[name] - 1.0 < img.dr_db < img.dr_db_extrapolated, name
 
-    Gamma2 clips at the word (2**16 - 1 - pedestal DN = 80 reads of about 818 DN), Gamma1 and the
-    HDR at the pixel's full well (about 972 DN per read): the gain over Gamma2 is only
-    20 lg(972 / 818) = about 1.5 dB instead of eq. 15's 18.06 dB.
-    """
-    eq15 = dr_increase_eq15_db(MU1, MU2)
-    k = SENSOR.conversion_gain_dn_per_e
-    pixel_top = min(SENSOR.full_well_e * k, 2**SENSOR.adc_bits - 1 - SENSOR.black_offset_dn)
-    word_top = (2**16 - 1 - dr16["offset_dn"]) / MU2
-    predicted = 20 * math.log10(pixel_top / word_top)
-    gain = dr16["delta_db_vs_gamma2"]
-    assert 0.0 < gain < eq15 - 10.0
-    assert gain == pytest.approx(predicted, abs=0.3)
-    # Gamma2 now has the larger DR of the two inputs (same bright end, sqrt(8) lower floor)
-    assert dr16["dr_db"]["gamma2"] > dr16["dr_db"]["gamma1"]
+
+def test_pixel_limited_gain_shrinks(dr16: ChainDR) -> None:
+    """beta = 16: stage 10 clips on the pixel, not the word; the gain over Gamma2 is the ratio of
+    the two clips (model), about 1.5 dB, not eq. 15's 18 dB, and not 'by construction'."""
+    assert not dr16.gain_over_gamma2_by_construction
+    ped = dr16.pedestal_dn
+    sat = {
+        m: stage_saturation_photons(CFG.sensor, CFG.timing.t_int_s, m, beta_bits=16, pedestal_dn=ped)
+        for m in (MU1, MU2)
+    }
+    assert dr16.gain_over_gamma2_db == pytest.approx(20 * math.log10(sat[MU1] / sat[MU2]), abs=0.3)
+    assert dr16.dr_db["gamma2"] > dr16.dr_db["gamma1"]
 
 
 def test_hdr_monotonic_noise_off() -> None:
-    """Noise off: Gamma_HDR grows with the scene signal and equals gamma2 where that is unsaturated."""
-    quiet = SENSOR.model_copy(
-        update={
-            "shot_noise": False,
-            "dark_noise": False,
-            "read_noise": False,
-            "prnu_enabled": False,
-            "dsnu_enabled": False,
-            "column_fpn": False,
-        }
+    """Noise off: Gamma_HDR grows with the scene signal, equals gamma2's signal where that is
+    unsaturated, and reaches (mu2/mu1) x gamma1's signal range."""
+    quiet = with_overrides(
+        CFG,
+        {"sensor": {k: False for k in (
+            "shot_noise", "dark_noise", "read_noise", "prnu_enabled", "dsnu_enabled", "column_fpn"
+        )}},
     )
-    levels = np.linspace(0.0, 25000.0, 400)  # beyond gamma1's saturation (~10,300 photons)
-    s = photon_transfer_series(
-        quiet, DTDIConfig(beta_bits=12), T_INT_S, MU1, MU2, np.random.default_rng(0), levels,
-        lines=2, columns=4, offset_dn=0.0,
-    )
-    hdr, g1, g2 = s["hdr"]["mean_dn"], s["gamma1"]["mean_dn"], s["gamma2"]["mean_dn"]
-    assert np.all(np.diff(hdr) >= 0)
-    assert np.all(s["hdr"]["temporal_var_dn2"] == 0)
-    unsat = g2 < 4095
-    assert np.all(hdr[unsat] >= g2[unsat])
-    assert np.all(hdr >= g2) and hdr.max() == 8 * 4095 and g1.max() == 4095
-    assert np.any(~unsat) and np.any(unsat)
+    ped = quiet.dtdi.pedestal_dn
+    fixed = draw_fixed_pattern(quiet.sensor, np.random.default_rng(0))
+    off = measurement_offsets_dn(quiet, (MU1, MU2), ped)
+    hdr, s2 = [], []
+    for p in np.linspace(0.0, 25000.0, 120):  # beyond gamma1's saturation (~10,000 photons)
+        st = expose_uniform(
+            quiet, (MU1, MU2), p, np.random.default_rng(0), fixed=fixed, lines=1, columns=4, images=1,
+            pedestal_dn=ped,
+        )
+        f = fuse_dtdi_hdr_eq11(st[MU1][0], st[MU2][0], mu1=MU1, mu2=MU2, beta=12, pedestal_dn=ped)
+        hdr.append(float(f.hdr.mean()))
+        s2.append(float(st[MU2][0].mean()) - off[MU2])
+    hdr_a, s2_a = np.asarray(hdr), np.asarray(s2)
+    assert np.all(np.diff(hdr_a) >= 0)
+    unsat = s2_a < 4095 - ped - 8  # one stage-10 DN below gamma2's clip
+    assert np.any(unsat) and np.any(~unsat)
+    np.testing.assert_array_equal(hdr_a[unsat], s2_a[unsat])
+    assert hdr_a.max() == 8 * (4095 - ped)
 
 
-def test_hdr_monotonic_averaged_with_noise(dr12: dict[str, Any]) -> None:
+def test_hdr_monotonic_averaged_with_noise(dr12: ChainDR) -> None:
     """With all noise on, the level means of Gamma_HDR rise with the signal (to 4 standard errors)."""
-    n_pix = dr12["lines"] * dr12["columns"] * 2
-    img = dr12["images"]
-    hdr = np.asarray(img["hdr"]["mean_dn"])
-    se = np.asarray(img["hdr"]["temporal_std_dn"]) / math.sqrt(n_pix)
-    step_se = np.sqrt(se[1:] ** 2 + se[:-1] ** 2)
-    assert np.all(np.diff(hdr) >= -4 * step_se)
-    assert hdr[-1] > 7 * 4095 * 0.9  # reaches the extended range
-    g2 = np.asarray(img["gamma2"]["mean_dn"])
-    g2_se = np.asarray(img["gamma2"]["temporal_std_dn"]) / math.sqrt(n_pix)
-    top = 4095 - dr12["offset_dn"]
-    unsat = g2 + 5 * np.asarray(img["gamma2"]["temporal_std_dn"]) < top
-    assert np.any(unsat)
-    assert np.all(hdr[unsat] >= g2[unsat] - 4 * np.sqrt(se[unsat] ** 2 + g2_se[unsat] ** 2))
+    n_pix = dr12.lines * dr12.columns * 2
+    hdr = dr12.images["hdr"]
+    se = hdr.temporal_std_dn / math.sqrt(n_pix)
+    assert np.all(np.diff(hdr.mean_dn) >= -4 * np.sqrt(se[1:] ** 2 + se[:-1] ** 2))
+    assert hdr.mean_dn[-1] > 7 * 4095 * 0.9  # reaches the extended range
 
 
-def test_offset_covers_the_dark_noise() -> None:
-    # 6 sigma of 80 coherent column offsets and 80 incoherent reads
-    k = SENSOR.conversion_gain_dn_per_e
-    read_var = k**2 * (SENSOR.read_noise_e**2 + SENSOR.dark_current_e_s * T_INT_S) + 1 / 12
-    dsnu_var = (k * SENSOR.dsnu_e_s * T_INT_S) ** 2
-    sigma = math.sqrt(80**2 * SENSOR.column_offset_dn**2 + 80 * (read_var + dsnu_var))
-    assert ptc_offset_dn(SENSOR, DTDIConfig(), T_INT_S, 80) == math.ceil(6 * sigma)
-    # without black subtraction stage 80 carries 80 x black: the offset must cover it
-    no_sub = DTDIConfig(subtract_black=False)
-    assert ptc_offset_dn(SENSOR, no_sub, T_INT_S, 80) >= 80 * SENSOR.black_offset_dn
+def test_measurement_pedestal_keeps_the_dark_value_unclipped() -> None:
+    """With no configured pedestal the measurement raises it to 5 sigma of stage 80's dark
+    spread: none of the dark stage values is stored as 0; without it about half would be."""
+    cfg = _cfg(pedestal_dn=0)
+    ped = measurement_pedestal_dn(cfg, (MU1, MU2))
+    assert ped >= PEDESTAL_SIGMAS * stage_dark_std_dn(cfg.sensor, cfg.timing.t_int_s, MU2)
+    fixed = draw_fixed_pattern(cfg.sensor, np.random.default_rng(1))
+    kw = {"fixed": fixed, "lines": 64, "columns": 256, "images": 1}
+    dark = expose_uniform(cfg, (MU2,), 0.0, np.random.default_rng(2), pedestal_dn=ped, **kw)[MU2]
+    raw = expose_uniform(cfg, (MU2,), 0.0, np.random.default_rng(2), pedestal_dn=0, **kw)[MU2]
+    assert np.mean(dark == 0) == 0.0
+    assert 0.3 < np.mean(raw == 0) < 0.7
+    # the default config's 64 DN already covers it: the measurement runs the configured chain
+    assert measurement_pedestal_dn(CFG, (MU1, MU2)) == CFG.dtdi.pedestal_dn == 64
 
 
 def test_gain_without_black_subtraction() -> None:
-    """subtract_black off (stage m carries m x black): the offset is equalised, eq. 15 still holds."""
-    r = measure_dynamic_range(
-        SENSOR, DTDIConfig(beta_bits=12, subtract_black=False), T_INT_S, MU1, MU2,
-        np.random.default_rng(3), n_levels=30, lines=16,
-    )
-    assert r["offset_dn"] >= MU2 * SENSOR.black_offset_dn
-    assert abs(r["delta_db_vs_gamma2"] - dr_increase_eq15_db(MU1, MU2)) <= 0.3
+    """subtract_black off (stage m carries m x black): the offsets differ per stage and are
+    removed; stage 80's accumulated black takes word range, so the gain over Gamma2 exceeds
+    eq. 15 by the ratio of the two signal ranges (the model's), and is not 'by construction'."""
+    r = measure_chain_dynamic_range(_cfg(subtract_black=False), 3, n_levels=30, lines=16)
+    assert r.offsets_dn[MU2] - r.offsets_dn[MU1] == (MU2 - MU1) * CFG.sensor.black_offset_dn
+    assert not r.gain_over_gamma2_by_construction
+    ranges = [4095 - r.offsets_dn[m] for m in (MU1, MU2)]
+    predicted = dr_increase_eq15_db(MU1, MU2) + 20 * math.log10(ranges[0] / ranges[1])
+    ext = r.images["hdr"].dr_db_extrapolated - r.images["gamma2"].dr_db_extrapolated
+    assert ext == pytest.approx(predicted, abs=0.3)  # the clip points: exact up to noise
+    assert r.gain_over_gamma2_db == pytest.approx(predicted, abs=1.5)  # variance maxima: near it
 
 
-def test_measure_dynamic_range_is_deterministic() -> None:
-    kw: dict[str, Any] = {"n_levels": 10, "lines": 4, "columns": 8}
-    a = measure_dynamic_range(SENSOR, DTDIConfig(), T_INT_S, MU1, MU2, np.random.default_rng(7), **kw)
-    b = measure_dynamic_range(SENSOR, DTDIConfig(), T_INT_S, MU1, MU2, np.random.default_rng(7), **kw)
-    c = measure_dynamic_range(SENSOR, DTDIConfig(), T_INT_S, MU1, MU2, np.random.default_rng(8), **kw)
+def test_measure_chain_dynamic_range_is_deterministic() -> None:
+    kw = {"n_levels": 10, "lines": 4, "columns": 8}
+    a = measure_chain_dynamic_range(CFG, 7, **kw).as_dict()
+    b = measure_chain_dynamic_range(CFG, 7, **kw).as_dict()
+    c = measure_chain_dynamic_range(CFG, 8, **kw).as_dict()
     assert a == b
     assert a["images"]["gamma2"]["mean_dn"] != c["images"]["gamma2"]["mean_dn"]
 
 
-def test_variance_max_saturation_is_refined() -> None:
-    kw: dict[str, Any] = {"n_levels": 12, "lines": 4, "columns": 8}
-    r = measure_dynamic_range(
-        SENSOR, DTDIConfig(), T_INT_S, MU1, MU2, np.random.default_rng(1),
-        saturation="interpolated", refine_rounds=1, refine_points=4, **kw,
+def test_variance_max_saturation_is_located_accurately() -> None:
+    """A coarse grid (12 levels over 3 decades, ~5 dB apart) refined twice finds Gamma2's
+    variance maximum where a dense 0.5 %-step scan (another seed) finds it, to the scatter of
+    the maximum itself (~2 % for 1024-pixel images); the parabola on the coarse grid alone is
+    off by far more."""
+    kw = {"n_levels": 12, "lines": 16, "columns": 32}
+    coarse = measure_chain_dynamic_range(CFG, 1, **kw)
+    unrefined = measure_chain_dynamic_range(CFG, 1, refine_rounds=0, **kw)
+    sat = coarse.images["gamma2"].photons_sat
+    assert coarse.level_step_db_max > 4.0
+    dense = measure_chain_dynamic_range(
+        CFG, 2, levels=np.union1d(coarse.photons, sat * np.linspace(0.85, 1.1, 51)), lines=16,
+        columns=32, refine_rounds=0,
     )
-    assert r["saturation"] == "interpolated"
-    assert len(r["photons"]) > 13  # 12 lit levels + dark + refinement levels
+    truth = dense.images["gamma2"].photons_sat
+    assert sat == pytest.approx(truth, rel=0.04)
+    assert abs(unrefined.images["gamma2"].photons_sat / truth - 1) > 0.15
+    # EMVA's point lies below the extrapolated one (where the plateau is met)
+    assert sat < coarse.images["gamma2"].photons_sat_extrapolated

@@ -66,11 +66,32 @@ def test_fuse_happy_path(tmp_path: Path) -> None:
     assert (meta["mu1"], meta["mu2"], meta["beta"], meta["phi_fs_dn"]) == (10, 80, 12, 4096)
     assert meta["threshold_dn"] == 512.0 and meta["full_scale_dn"] == 8 * 4095
     assert meta["inputs"]["low"]["path"] == str(low) and len(meta["inputs"]["high"]["sha256"]) == 64
-    assert meta["bench_sim_version"] and meta["pixels_from_low"] == int((expected.source == 10).sum())
+    assert meta["version"] and meta["pixels_from_low"] == int((expected.source == 10).sum())
     display = read_image(tra)
     assert display.shape == g1.shape and display.max() <= 255 and display.max() > 200
     # the HDR file reads back as the fused image (channel Y)
     np.testing.assert_array_equal(read_image(out), expected.hdr.astype(np.float32))
+
+
+@pytest.mark.parametrize("pedestal", [0, 64, 300])
+def test_fuse_pedestal_keeps_the_noise_free_response_linear(tmp_path: Path, pedestal: int) -> None:
+    """Noise-free words carrying a pedestal P: with ``--pedestal P`` the fused response is
+    ``(mu2/mu1) * signal1`` across the switch (to the 1-DN clip step of eq. 11); without it the
+    dark end is off by P."""
+    s1 = np.arange(0, 4096 - pedestal, 7, dtype=np.float64)[None, :]  # stage-10 signal [DN]
+    s2 = np.minimum(8 * s1, 4095 - pedestal)
+    np.save(tmp_path / "low.npy", (s1 + pedestal).astype(np.int32))
+    np.save(tmp_path / "high.npy", (s2 + pedestal).astype(np.int32))
+    args = [str(tmp_path / "low.npy"), str(tmp_path / "high.npy"), "--mu1", "10", "--mu2", "80"]
+    r = _fuse(*args, "--pedestal", str(pedestal), "--out", str(tmp_path / "p.exr"))
+    assert r.exit_code == 0, r.stderr  # type: ignore[attr-defined]
+    channels, meta = _exr(tmp_path / "p.exr")
+    assert np.all(np.abs(channels["Y"] - 8 * s1) <= 1.0)
+    assert meta["pedestal_dn"] == pedestal and meta["threshold_dn"] == (4096 - pedestal) / 8
+    if pedestal:
+        _fuse(*args, "--out", str(tmp_path / "n.exr"))
+        plain, _ = _exr(tmp_path / "n.exr")
+        assert plain["Y"][0, 0] - 8 * s1[0, 0] == pedestal  # the offset left in
 
 
 def test_fuse_npy_and_exr_inputs_and_determinism(tmp_path: Path) -> None:

@@ -92,7 +92,7 @@ def test_ptc_recovers_gain_and_dark_noise_within_3_percent(ptc_run) -> None:
 
 def test_ptc_files_follow_the_emva_descriptor_format(ptc_run) -> None:
     out, res, cfg = ptc_run
-    assert res["levels"] >= 31 and res["bench_sim_version"] == bench_sim.__version__
+    assert res["levels"] >= 31 and res["version"] == bench_sim.__version__
     assert res["config_sha256"] == config_sha256(cfg) and res["seed"] == 5
     for m in (1, 4, 16):
         d = parse_descriptor(out / f"stage_{m:03d}" / "emva1288.txt")
@@ -184,10 +184,25 @@ def test_beta_above_16_is_refused_before_writing(tmp_path: Path) -> None:
         run_ptc(small_cfg(), [1], 0, tmp_path / "file")
 
 
-def test_subtract_black_off_uses_the_accumulated_offset_as_pedestal(tmp_path: Path) -> None:
+def test_subtract_black_off_keeps_the_accumulated_offset(tmp_path: Path) -> None:
+    """subtract_black off: stage m's dark level is m x black + the configured pedestal, and the
+    analysis (dark-subtracted) still recovers K."""
     cfg = small_cfg(dtdi={"subtract_black": False, "beta_bits": 16})
     res = _fast(cfg, 1, tmp_path)
     for m in (1, 3):
         r = res["results"][str(m)]
-        assert r["pedestal_dn"] == 0  # m * black (20 DN per row) already keeps the dark above 0
-        assert r["dark"]["mean_dn"] == pytest.approx(m * cfg.sensor.black_offset_dn, abs=1.0)
+        assert r["pedestal_dn"] == cfg.dtdi.pedestal_dn  # the configured one already suffices
+        offset = m * cfg.sensor.black_offset_dn + cfg.dtdi.pedestal_dn
+        assert r["offset_dn"] == offset
+        dark_e = m * cfg.sensor.dark_current_e_s * cfg.timing.t_int_s * cfg.sensor.conversion_gain_dn_per_e
+        assert r["dark"]["mean_dn"] == pytest.approx(offset + dark_e, abs=1.0)
+
+
+def test_measurement_raises_a_too_small_pedestal(tmp_path: Path) -> None:
+    """A configured pedestal of 0 is raised to 5 sigma of the highest stage's dark spread, so
+    the dark pair has no value clipped at 0 DN."""
+    cfg = small_cfg(dtdi={"pedestal_dn": 0})
+    res = _fast(cfg, 2, tmp_path)
+    assert res["configured_pedestal_dn"] == 0 and res["pedestal_dn"] > 0
+    dark = tifffile.imread(tmp_path / "stage_003" / "images" / "dark_a.tif")
+    assert dark.min() > 0

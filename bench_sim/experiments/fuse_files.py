@@ -33,23 +33,14 @@ from typing import Any
 import numpy as np
 
 from bench_sim import __version__
+from bench_sim.config import TRA_METHODS
 from bench_sim.errors import BenchSimError
 from bench_sim.fusion.common import BETA_MAX, BETA_MIN
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
-from bench_sim.fusion.tonemap import TRA_METHODS, gamma_tra
+from bench_sim.fusion.tonemap import gamma_tra
 from bench_sim.io import read_image, write_exr, write_png
 
 __all__ = ["fuse_files", "check_stage_image"]
-
-_TRA_FORMULAS = {
-    "log": "y = ln(1 + max(x, 0)) / ln(1 + X)",
-    "gamma": "y = clip(x / X, 0, 1) ** (1 / 2.2)",
-    "histeq": "y = (C(x) - C(x_min)) / (P - C(x_min)), C = cumulative pixel count",
-    "reinhard": "OpenCV TonemapReinhard(gamma=2.2) of max(x / X, 0.5 / X)",
-    "drago": "OpenCV TonemapDrago(gamma=2.2) of max(x / X, 0.5 / X)",
-    "mantiuk": "OpenCV TonemapMantiuk(gamma=2.2) of max(x / X, 0.5 / X)",
-}
-
 
 def _where(arr: np.ndarray, mask: np.ndarray) -> tuple[float, str]:
     idx = tuple(int(i) for i in np.argwhere(mask)[0])
@@ -140,6 +131,7 @@ def fuse_files(
     out: str | os.PathLike[str],
     tra: str | os.PathLike[str] | None = None,
     tra_method: str = "log",
+    pedestal_dn: float = 0.0,
 ) -> dict[str, Any]:
     """Read two stage images, fuse them with eq. 11, write the HDR EXR (and ``Gamma_TRA`` PNG).
 
@@ -159,6 +151,10 @@ def fuse_files(
         Optional display output, ``.png`` (8-bit).
     tra_method
         Display transform, one of ``log, gamma, histeq, reinhard, drago, mantiuk``.
+    pedestal_dn
+        Offset [DN] both stage words carry besides the signal (``--pedestal``): the DTDI
+        pedestal, ``dtdi.pedestal_dn`` for images made by bench_sim (64 DN by default; their
+        metadata names it); ``0`` for a plain word. It is subtracted before eq. 11.
 
     Returns
     -------
@@ -183,6 +179,10 @@ def fuse_files(
         raise BenchSimError(f"--mu1 = {mu1}, --mu2 = {mu2}: need mu1 < mu2 (1 <= mu1 < mu2)")
     if tra_method not in TRA_METHODS:
         raise BenchSimError(f"tra method = {tra_method!r}: allowed {', '.join(TRA_METHODS)}")
+    if not (np.isfinite(pedestal_dn) and 0 <= pedestal_dn < 2**beta - 1):
+        raise BenchSimError(
+            f"--pedestal = {pedestal_dn!r}: must lie in 0..{2**beta - 1} DN (below the word clip)"
+        )
     _check_out(out_p, "--out", ".exr")
     inputs = {low_p.resolve(), high_p.resolve()}
     if out_p.resolve() in inputs:
@@ -204,12 +204,12 @@ def fuse_files(
             "images must be the same size"
         )
 
-    result = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta)
+    result = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=float(pedestal_dn))
     display = gamma_tra(result.hdr, tra_method, full_scale_dn=result.full_scale_dn) if tra_p else None
     meta: dict[str, Any] = {
         "kind": "Gamma_HDR",
         "method": "paper eq. 11 (fuse_dtdi_hdr_eq11)",
-        "bench_sim_version": __version__,
+        "version": __version__,
         "inputs": {
             "low": {"path": str(low_p), "sha256": _sha256(low_p), "shape": list(g1.shape)},
             "high": {"path": str(high_p), "sha256": _sha256(high_p), "shape": list(g2.shape)},
@@ -218,7 +218,8 @@ def fuse_files(
         "mu2": mu2,
         "beta": beta,
         "phi_fs_dn": 2**beta,
-        "threshold_dn": eq11_threshold_dn(mu1, mu2, beta),
+        "pedestal_dn": float(pedestal_dn),
+        "threshold_dn": eq11_threshold_dn(mu1, mu2, beta, float(pedestal_dn)),
         "full_scale_dn": result.full_scale_dn,
         "units": f"DN in stage-mu2 (= {mu2}) units",
         "channels": {
@@ -233,7 +234,7 @@ def fuse_files(
         tra_meta = {
             "kind": "Gamma_TRA",
             "tra": tra_method,
-            "formula": _TRA_FORMULAS[tra_method],
+            "formula": TRA_METHODS[tra_method],
             "x": "Gamma_HDR [DN]",
             "X_full_scale_dn": result.full_scale_dn,
             "bits": 8,
@@ -241,7 +242,7 @@ def fuse_files(
             "mu1": mu1,
             "mu2": mu2,
             "beta": beta,
-            "bench_sim_version": __version__,
+            "version": __version__,
         }
         try:
             write_png(tra_p, display, tra_meta)

@@ -1,73 +1,82 @@
 """Photon-transfer measurement (EMVA 1288 R4) of DTDI stages, through the real sensor + DTDI code.
 
-``bench-sim ptc [CONFIG] --stages 1,10,80 --seed S --out DIR`` runs :func:`run_ptc`.
+``bench-sim ptc [CONFIG] --stages 1,10,80 --seed S --out DIR`` runs :func:`run_ptc` in four
+steps: :func:`plan_ptc` (validate, place the levels) -> :func:`measure_ptc` (expose) ->
+:func:`analyse_ptc` (EMVA 1288 analysis) -> :func:`write_ptc` (files, as one output set).
 
 Measurement
 -----------
-A uniform field of ``mu_p`` photons per pixel per frame is exposed through the EMVA 1288 pixel
-model and the streaming DTDI accumulator (:func:`bench_sim.sensor.pipeline.sensor_dtdi_pass`),
-with the config's sensor, timing and DTDI settings. One pass of ``K = 2 L + max(stages) - 1``
-frames over the top-left ``max(stages)`` rows x ``C`` columns of the sensor gives, for every
-requested stage, ``2 L`` complete lines: lines ``0 .. L-1`` are image A, lines ``L .. 2L-1`` image
-B (their temporal noise is independent: every line sums different pixel reads). The default
-image is ``L = 64`` lines x ``C = 256`` columns (or the sensor's width if smaller); one pass per
-level, so the whole series runs in seconds.
+The uniform-field runner (:mod:`bench_sim.experiments.uniform_field`) exposes a uniform field
+of ``mu_p`` photons per pixel per frame through the EMVA 1288 pixel model and the streaming DTDI
+accumulator, with the config's sensor, timing and DTDI settings. One pass of
+``K = 2 L + max(stages) - 1`` frames over the top-left ``max(stages)`` rows x ``C`` columns gives,
+for every requested stage, an image pair of ``L`` lines each. The default image is ``L = 64``
+lines x ``C = 256`` columns (or the sensor's width if smaller).
 
 Levels (mean photons per pixel per frame): a dark level, ``log_levels`` log-spaced levels from
 well below SNR = 1 of the highest stage to 1.5 x the saturation of the lowest stage, plus
 ``dense_levels`` levels from 0.90 to 1.02 x the predicted saturation of every requested stage
-(the prediction is the closed-form model; it only places the levels, the analysis uses the
-images). Every stage sees every level. For stage ``m`` the descriptor's photon count is the
-mean number of photons per pixel summed over the ``m`` frames that make the stage value
-(``m * mu_p``) and its exposure time is ``m * t_int``.
+(:mod:`bench_sim.sensor.model`; it only places the levels, the analysis uses the images).
+Every stage sees every level. For stage ``m`` the descriptor's photon count is the mean number
+of photons per pixel summed over the ``m`` frames that make the stage value (``m * mu_p``) and
+its exposure time is ``m * t_int``.
 
-Spatial stacks (DSNU, PRNU; the EMVA reference package needs them): ``spatial_images`` (16)
-images in the dark and at 50 % of each stage's predicted saturation, consecutive line blocks
-of one pass each. In a DTDI stage every line sums the same ``m`` pixels of its column, so the
-fixed pattern is a column pattern.
+Spatial stacks (DSNU, PRNU): ``spatial_images`` (16) images in the dark and at 50 % of each
+stage's predicted saturation. In a DTDI stage every line sums the same ``m`` pixels of its
+column, so the fixed pattern is a column pattern; the expected values are
+:func:`bench_sim.sensor.model.stage_dsnu_dn` and :func:`bench_sim.sensor.model.stage_prnu`.
 
-Pedestal
---------
-EMVA 1288 needs the dark signal unclipped. With ``dtdi.subtract_black = true`` a stage's dark
-value sits at 0 DN and would be clipped by the output word (values below 0 are stored as 0), so
-the measurement adds a pedestal ``P_m`` [DN] to stage ``m``: ``ceil(5 sigma)`` of its dark
-signal's spread (temporal noise, DSNU and the column offsets, which add coherently over the
-``m`` rows), less the accumulated black offset ``m * b`` when ``subtract_black`` is false. The
-pedestal lowers the usable range of stage ``m`` by ``P_m`` DN (reported per stage).
+Pedestal: the one rule of the uniform-field runner
+(:func:`bench_sim.experiments.uniform_field.measurement_pedestal_dn`): the configured
+``dtdi.pedestal_dn`` (64 DN by default), raised where needed to keep every measured stage's
+dark value 5 sigma above 0 DN. It lowers the usable range of the word by the offset (reported).
 
-Files (DIR)
------------
+Files (DIR, written as one set)
+-------------------------------
 * ``stage_MMM/emva1288.txt``: EMVA 1288 descriptor (``n bits width height``; per level
   ``b exposure_ns photons`` and its two ``i images/...tif`` lines; ``d exposure_ns`` and the
-  dark pair; then the spatial stacks, a ``b`` and a ``d`` line with ``spatial_images`` ``i``
-  lines each), read by the ``emva1288`` reference package; images are 16-bit TIFF. A 16-bit
-  file holds the ``beta``-bit stage word only for ``beta <= 16``: a config with
-  ``dtdi.beta_bits > 16`` is refused with a clear error.
-* ``ptc_results.json``: per stage K, dark temporal noise, saturation capacity, SNR curve,
-  dynamic range (measured and model), the expected values from the config, and the series.
+  dark pair; then the spatial stacks), read by the ``emva1288`` reference package; images are
+  16-bit TIFF, so ``dtdi.beta_bits > 16`` is refused with a clear error.
+* ``ptc_results.json``: per stage K, QE, dark temporal noise, saturation capacity, SNR curve,
+  dynamic range, DSNU and PRNU (measured and model), the series.
 * ``ptc_levels.csv`` (every level of every stage), ``ptc_summary.csv`` (one row per stage).
 * ``ptc.png`` (photon transfer: variance vs mean), ``snr.png`` (SNR vs photons per frame).
 
-Every file carries the config (or its SHA-256 where a full copy does not fit), the seed and the
-bench_sim version; every file is written atomically after the whole series has been computed.
+Every file carries the provenance (:func:`bench_sim.experiments.provenance.provenance`).
+
+References
+----------
+EMVA Standard 1288, Release 4.0 Linear (2021): sections 2 (model), 6 (photon transfer),
+8 (spatial nonuniformity); the descriptor file format of the EMVA 1288 reference software.
 """
 
 from __future__ import annotations
 
-import csv
-import io
-import json
-import math
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-import bench_sim
-from bench_sim.config import BenchConfig, config_sha256, config_to_toml_dict
+from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.io import atomic_path, write_json, write_tiff16
+from bench_sim.experiments.provenance import provenance
+from bench_sim.experiments.uniform_field import (
+    expose_uniform,
+    measurement_offsets_dn,
+    measurement_pedestal_dn,
+)
+from bench_sim.io import (
+    check_output_dir,
+    output_set,
+    write_csv,
+    write_emva_descriptor,
+    write_figure_png,
+    write_json,
+    write_tiff16,
+)
 from bench_sim.metrics.emva1288 import (
+    PhotonTransferResult,
     analyse_photon_transfer,
     dynamic_range_from_series,
     mean_var_from_pair,
@@ -79,17 +88,22 @@ from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import (
     QUANTIZATION_VAR_DN2,
     dark_noise_e,
-    stage_dark_std_dn,
+    stage_dsnu_dn,
     stage_mean_var_dn,
+    stage_prnu,
     stage_saturation_photons,
     stage_snr1_photons,
 )
-from bench_sim.sensor.pipeline import sensor_dtdi_pass
 
 __all__ = [
+    "PtcPlan",
+    "PtcImages",
+    "StageResult",
+    "plan_ptc",
+    "measure_ptc",
+    "analyse_ptc",
+    "write_ptc",
     "run_ptc",
-    "plan_levels",
-    "ptc_pedestals",
     "DEFAULT_LINES",
     "DEFAULT_COLUMNS",
     "DEFAULT_LOG_LEVELS",
@@ -109,44 +123,138 @@ DENSE_FROM, DENSE_TO = 0.90, 1.02
 MAX_FILE_BITS = 16
 
 
-def ptc_pedestals(cfg: BenchConfig, stages: tuple[int, ...]) -> dict[int, int]:
-    """Pedestal [DN] per stage that keeps the dark signal 5 sigma above 0 (see module doc)."""
-    out: dict[int, int] = {}
-    b = cfg.sensor.black_offset_dn
-    for m in stages:
-        need = 5.0 * stage_dark_std_dn(cfg.sensor, cfg.timing.t_int_s, m) + 1.0
-        if not cfg.dtdi.subtract_black:
-            need -= m * b
-        out[m] = max(0, math.ceil(need))
-    return out
+@dataclass(frozen=True)
+class PtcPlan:
+    """What :func:`measure_ptc` exposes.
+
+    Attributes
+    ----------
+    stages
+        Stages measured (sorted).
+    lines, columns
+        Image size ``L x C``.
+    levels
+        Lit levels [mean photons per pixel per frame], increasing (the dark level is extra).
+    pedestal_dn
+        Word pedestal of the measurement [DN].
+    offsets_dn
+        Offset every stage's image carries (pedestal, plus ``m b`` with ``subtract_black`` off).
+    spatial_images
+        Images per spatial stack.
+    spatial_photons
+        Stage -> level of its bright spatial stack [photons per pixel per frame].
+    """
+
+    stages: tuple[int, ...]
+    lines: int
+    columns: int
+    levels: np.ndarray
+    pedestal_dn: int
+    offsets_dn: dict[int, float]
+    spatial_images: int
+    spatial_photons: dict[int, float]
+
+    @property
+    def all_levels(self) -> np.ndarray:
+        """The dark level 0 followed by :attr:`levels`."""
+        return np.concatenate([[0.0], self.levels])
 
 
-def _stage_saturation_photons(cfg: BenchConfig, stage: int, pedestal_dn: float) -> float:
+@dataclass(frozen=True)
+class PtcImages:
+    """The stage words exposed for a plan (``uint32``).
+
+    ``pairs[m]``: (levels + 1, 2, L, C), level 0 dark; ``spatial_dark[m]``, ``spatial_bright[m]``:
+    (n, L, C).
+    """
+
+    pairs: dict[int, np.ndarray]
+    spatial_dark: dict[int, np.ndarray]
+    spatial_bright: dict[int, np.ndarray]
+
+
+@dataclass(frozen=True)
+class StageResult:
+    """EMVA 1288 results of one stage and what the config predicts for them."""
+
+    stage: int
+    exposure_ns: float
+    pedestal_dn: int
+    offset_dn: float
+    measured: PhotonTransferResult
+    dr_db_by_saturation_method: dict[str, float]
+    spatial: dict[str, float]
+    expected: dict[str, float]
+    dark_mean_dn: float
+    dark_var_dn2: float
+    photons_per_frame: np.ndarray = field(repr=False)
+    mean_dn: np.ndarray = field(repr=False)
+    var_dn2: np.ndarray = field(repr=False)
+    snr: np.ndarray = field(repr=False)
+    snr_model: np.ndarray = field(repr=False)
+
+    @property
+    def relative_error(self) -> dict[str, float | None]:
+        """Measured / expected - 1 for K, QE, dark noise (e-, DN), DSNU and PRNU."""
+        meas = {
+            "K": self.measured.k_dn_per_e,
+            "quantum_efficiency": self.measured.quantum_efficiency,
+            "dark_temporal_noise_e": self.measured.dark_temporal_noise_e,
+            "dark_temporal_noise_dn": self.measured.dark_temporal_noise_dn,
+            "dsnu_e": self.spatial["dsnu_e"],
+            "prnu": self.spatial["prnu"],
+        }
+        exp = {**self.expected, "K": self.expected["K_dn_per_e"]}
+        return {k: (v / exp[k] - 1.0 if exp[k] > 0 else None) for k, v in meas.items()}
+
+    def as_dict(self) -> dict[str, Any]:
+        m = self.stage
+        signal = self.mean_dn - self.dark_mean_dn
+        return {
+            "stage": m,
+            "exposure_ns": self.exposure_ns,
+            "pedestal_dn": self.pedestal_dn,
+            "offset_dn": self.offset_dn,
+            "measured": self.measured.summary(),
+            "dynamic_range_db_by_saturation_method": dict(self.dr_db_by_saturation_method),
+            "spatial": dict(self.spatial),
+            "per_frame": {
+                "photons_sat": self.measured.photons_sat / m,
+                "photons_min": self.measured.photons_min / m,
+                "photons_min_model": self.measured.photons_min_model / m,
+            },
+            "expected": dict(self.expected),
+            "relative_error": self.relative_error,
+            "dark": {"mean_dn": self.dark_mean_dn, "var_dn2": self.dark_var_dn2},
+            "series": {
+                "photons_per_frame": self.photons_per_frame.tolist(),
+                "photons": (m * self.photons_per_frame).tolist(),
+                "mean_dn": self.mean_dn.tolist(),
+                "var_dn2": self.var_dn2.tolist(),
+                "signal_dn": signal.tolist(),
+                "snr": [float(x) if np.isfinite(x) else None for x in self.snr],
+                "snr_model": self.snr_model.tolist(),
+            },
+        }
+
+
+def _saturation(cfg: BenchConfig, stage: int, pedestal_dn: float) -> float:
     return stage_saturation_photons(
         cfg.sensor, cfg.timing.t_int_s, stage, beta_bits=cfg.dtdi.beta_bits,
         subtract_black=cfg.dtdi.subtract_black, pedestal_dn=pedestal_dn,
     )
 
 
-def plan_levels(
-    cfg: BenchConfig,
-    stages: tuple[int, ...],
-    pedestals: dict[int, int],
-    log_levels: int = DEFAULT_LOG_LEVELS,
-    dense_levels: int = DEFAULT_DENSE_LEVELS,
+def _plan_levels(
+    cfg: BenchConfig, stages: tuple[int, ...], pedestal_dn: float, log_levels: int, dense_levels: int
 ) -> np.ndarray:
-    """Bright levels [mean photons per pixel per frame], increasing (the dark level excluded).
-
-    ``log_levels`` log-spaced levels from 0.25 x the SNR = 1 level of the highest stage to
+    """``log_levels`` log-spaced levels from 0.25 x the SNR = 1 level of the highest stage to
     1.5 x the saturation of the lowest stage, and ``dense_levels`` from 0.90 to 1.02 x each
-    stage's predicted saturation. Levels closer than 0.5 % are merged.
-    """
-    p_sat = {m: _stage_saturation_photons(cfg, m, pedestals[m]) for m in stages}
+    stage's predicted saturation; levels closer than 0.5 % are merged."""
+    p_sat = {m: _saturation(cfg, m, pedestal_dn) for m in stages}
     p_lo = 0.25 * min(stage_snr1_photons(cfg.sensor, cfg.timing.t_int_s, m) for m in stages)
-    p_hi = 1.5 * max(p_sat.values())
-    grid = [np.geomspace(p_lo, p_hi, log_levels)]
-    for m in stages:
-        grid.append(p_sat[m] * np.linspace(DENSE_FROM, DENSE_TO, dense_levels))
+    grid = [np.geomspace(p_lo, 1.5 * max(p_sat.values()), log_levels)]
+    grid += [p_sat[m] * np.linspace(DENSE_FROM, DENSE_TO, dense_levels) for m in stages]
     levels = np.unique(np.concatenate(grid))
     keep = [float(levels[0])]
     for v in levels[1:]:
@@ -155,13 +263,18 @@ def plan_levels(
     return np.asarray(keep)
 
 
-def _validate(
-    cfg: BenchConfig, stages: list[int], seed: int, out: Path, lines: int, columns: int | None,
-    log_levels: int, dense_levels: int, spatial_images: int,
-) -> tuple[tuple[int, ...], int]:
+def plan_ptc(
+    cfg: BenchConfig,
+    stages: list[int] | tuple[int, ...],
+    *,
+    lines: int = DEFAULT_LINES,
+    columns: int | None = None,
+    log_levels: int = DEFAULT_LOG_LEVELS,
+    dense_levels: int = DEFAULT_DENSE_LEVELS,
+    spatial_images: int = DEFAULT_SPATIAL_IMAGES,
+) -> PtcPlan:
+    """Validate the arguments and place the levels. Raises :class:`BenchSimError` (one line)."""
     st = validate_stages(stages, cfg.sensor.rows)
-    if not isinstance(seed, int | np.integer) or isinstance(seed, bool) or seed < 0:
-        raise BenchSimError(f"--seed = {seed!r}: must be an integer >= 0")
     if cfg.dtdi.beta_bits > MAX_FILE_BITS:
         raise BenchSimError(
             f"dtdi.beta_bits = {cfg.dtdi.beta_bits}: EMVA 1288 image files are 16-bit, so the "
@@ -178,120 +291,256 @@ def _validate(
         raise BenchSimError(f"dense_levels = {dense_levels!r}: need at least 3 near saturation")
     if spatial_images < 3:
         raise BenchSimError(f"spatial_images = {spatial_images!r}: EMVA spatial stacks need >= 3")
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise BenchSimError(f"--out = {str(out)!r}: exists and is not a folder")
-    return st, cols
-
-
-def _metadata(cfg: BenchConfig, seed: int) -> dict[str, Any]:
-    return {
-        "bench_sim_version": bench_sim.__version__,
-        "seed": int(seed),
-        "config_sha256": config_sha256(cfg),
-        "config": config_to_toml_dict(cfg),
-    }
-
-
-def _descriptor_text(
-    stage: int, bits: int, width: int, height: int, exposure_ns: float,
-    bright: list[tuple[float, list[str]]], dark: list[list[str]], meta: dict[str, Any],
-) -> str:
-    """EMVA 1288 descriptor: ``n bits width height``; ``b exposure_ns photons`` / ``d exposure_ns``
-    each followed by its ``i path`` lines (2 images: temporal set; more: spatial set)."""
-    lines = [
-        f"# EMVA 1288 descriptor: bench_sim photon-transfer series of DTDI stage {stage}",
-        f"# bench_sim {meta['bench_sim_version']}  seed {meta['seed']}  "
-        f"config_sha256 {meta['config_sha256']}",
-        "# photons: mean photons per pixel summed over the stage's frames; exposure: ns",
-        "# config: " + json.dumps(meta["config"], sort_keys=True),
-        "v 4.0",
-        f"n {bits} {width} {height}",
-    ]
-    for photons, names in bright:
-        lines.append(f"b {exposure_ns:.3f} {photons:.9g}")
-        lines += [f"i {n}" for n in names]
-    for names in dark:
-        lines.append(f"d {exposure_ns:.3f}")
-        lines += [f"i {n}" for n in names]
-    return "\n".join(lines) + "\n"
-
-
-def _csv_text(header: list[str], rows: list[list[Any]], meta: dict[str, Any]) -> str:
-    buf = io.StringIO()
-    buf.write(
-        f"# bench_sim {meta['bench_sim_version']} seed={meta['seed']} "
-        f"config_sha256={meta['config_sha256']}\n"
+    ped = measurement_pedestal_dn(cfg, st)
+    return PtcPlan(
+        stages=st,
+        lines=int(lines),
+        columns=cols,
+        levels=_plan_levels(cfg, st, ped, log_levels, dense_levels),
+        pedestal_dn=ped,
+        offsets_dn=measurement_offsets_dn(cfg, st, ped),
+        spatial_images=int(spatial_images),
+        spatial_photons={m: 0.5 * _saturation(cfg, m, ped) for m in st},
     )
-    buf.write("# config: " + json.dumps(meta["config"], sort_keys=True) + "\n")
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    for r in rows:
-        w.writerow([f"{v:.10g}" if isinstance(v, float) else v for v in r])
-    return buf.getvalue()
 
 
-def _write_text(path: Path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text)
+def measure_ptc(cfg: BenchConfig, plan: PtcPlan, seed: int) -> PtcImages:
+    """Expose the plan: one fixed pattern, then the levels in order, from one generator."""
+    rng = np.random.default_rng(seed)
+    fixed = draw_fixed_pattern(cfg.sensor, rng).window(plan.stages[-1], plan.columns)
+    kw: dict[str, Any] = {
+        "fixed": fixed, "lines": plan.lines, "columns": plan.columns, "pedestal_dn": plan.pedestal_dn
+    }
+    pairs: dict[int, list[np.ndarray]] = {m: [] for m in plan.stages}
+    for p in plan.all_levels:  # a pair per level, every stage from the same pass
+        for m, stack in expose_uniform(cfg, plan.stages, float(p), rng, images=2, **kw).items():
+            pairs[m].append(stack)
+    n = plan.spatial_images
+    spatial_dark = expose_uniform(cfg, plan.stages, 0.0, rng, images=n, **kw)
+    spatial_bright = {
+        m: expose_uniform(cfg, (m,), plan.spatial_photons[m], rng, images=n, **kw)[m] for m in plan.stages
+    }
+    return PtcImages(
+        pairs={m: np.stack(v) for m, v in pairs.items()},
+        spatial_dark=spatial_dark,
+        spatial_bright=spatial_bright,
+    )
 
 
-def _plots(results: dict[int, dict[str, Any]], meta: dict[str, Any]) -> dict[str, bytes]:
-    """The PTC and SNR plots as PNG bytes (rendered before anything is written)."""
+def analyse_ptc(cfg: BenchConfig, plan: PtcPlan, images: PtcImages) -> dict[int, StageResult]:
+    """EMVA 1288 analysis of every stage, with the model's expectations from the config."""
+    s, t = cfg.sensor, cfg.timing.t_int_s
+    out: dict[int, StageResult] = {}
+    for m in plan.stages:
+        # quantisation noise of the stage: m pixel ADC roundings, or one of the output word
+        q_var = m * QUANTIZATION_VAR_DN2 if s.quantization else QUANTIZATION_VAR_DN2
+        mv = np.array([mean_var_from_pair(a, b) for a, b in images.pairs[m]])
+        dark_mean, dark_var = float(mv[0, 0]), float(mv[0, 1])
+        mean, var = mv[1:, 0], mv[1:, 1]
+        photons = m * plan.levels
+        res = analyse_photon_transfer(photons, mean, var, dark_mean, dark_var, quantization_var_dn2=q_var)
+        std = np.sqrt(np.maximum(var, 0.0))
+        by_method = {
+            meth: dynamic_range_from_series(
+                np.concatenate([[0.0], photons]), np.concatenate([[dark_mean], mean]),
+                np.concatenate([[np.sqrt(max(dark_var, 0.0))], std]), dark_signal=dark_mean,
+                saturation=meth, responsivity=res.responsivity_dn_per_photon,
+            ).dr_db
+            for meth in ("max_variance", "interpolated", "extrapolated")
+        }
+        spatial = spatial_nonuniformity(images.spatial_bright[m], images.spatial_dark[m], res.k_dn_per_e)
+        mean_model, var_model = stage_mean_var_dn(plan.levels, s, t, m)
+        dark_model, dark_var_model = stage_mean_var_dn(0.0, s, t, m)
+        k = s.conversion_gain_dn_per_e
+        expected = {
+            "K_dn_per_e": k,
+            "quantum_efficiency": s.quantum_efficiency,
+            "dark_temporal_noise_e": float(np.sqrt(m)) * dark_noise_e(s, t),
+            "dark_temporal_noise_dn": float(np.sqrt(dark_var_model)),
+            "saturation_photons_per_frame": _saturation(cfg, m, plan.pedestal_dn),
+            "dsnu_e": stage_dsnu_dn(s, t, m) / k,
+            "prnu": stage_prnu(s, m),
+        }
+        out[m] = StageResult(
+            stage=m,
+            exposure_ns=m * t * 1e9,
+            pedestal_dn=plan.pedestal_dn,
+            offset_dn=plan.offsets_dn[m],
+            measured=res,
+            dr_db_by_saturation_method=by_method,
+            spatial={**spatial, "photons_per_frame": plan.spatial_photons[m], "images": plan.spatial_images},
+            expected=expected,
+            dark_mean_dn=dark_mean,
+            dark_var_dn2=dark_var,
+            photons_per_frame=plan.levels,
+            mean_dn=mean,
+            var_dn2=var,
+            snr=snr_curve(mean - dark_mean, std),
+            snr_model=(mean_model - dark_model) / np.sqrt(var_model),
+        )
+    return out
+
+
+def _plots(results: dict[int, StageResult]) -> dict[str, Any]:
+    """The PTC and SNR figures (matplotlib, not yet written)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    png_meta = {
-        "Software": f"bench_sim {meta['bench_sim_version']}",
-        "Description": json.dumps(
-            {"seed": meta["seed"], "config_sha256": meta["config_sha256"], "config": meta["config"]},
-            sort_keys=True,
-        ),
-    }
-    written: dict[str, bytes] = {}
-
-    def _png(fig: Any) -> bytes:
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110, metadata=png_meta)
-        plt.close(fig)
-        return buf.getvalue()
-
+    figs: dict[str, Any] = {}
     fig, ax = plt.subplots(figsize=(7, 5))
     for m, r in results.items():
-        sig = np.asarray(r["series"]["signal_dn"])
-        var = np.asarray(r["series"]["var_dn2"]) - r["dark"]["var_dn2"]
+        sig = r.mean_dn - r.dark_mean_dn
+        var = r.var_dn2 - r.dark_var_dn2
         ok = (sig > 0) & (var > 0)
         (line,) = ax.loglog(sig[ok], var[ok], "o", ms=3, label=f"stage {m}")
-        k = r["measured"]["K_dn_per_e"]
-        xs = np.geomspace(max(sig[ok].min(), 1e-3), r["measured"]["saturation_signal_dn"], 50)
-        ax.loglog(xs, k * xs, "-", color=line.get_color(), lw=0.8)
+        xs = np.geomspace(max(sig[ok].min(), 1e-3), r.measured.saturation_signal_dn, 50)
+        ax.loglog(xs, r.measured.k_dn_per_e * xs, "-", color=line.get_color(), lw=0.8)
     ax.set_xlabel(r"$\mu_y - \mu_{y.dark}$ [DN]")
     ax.set_ylabel(r"$\sigma_y^2 - \sigma_{y.dark}^2$ [DN$^2$]")
     ax.set_title("Photon transfer (lines: fitted K)")
     ax.grid(True, which="both", lw=0.3)
     ax.legend()
-    written["ptc.png"] = _png(fig)
+    figs["ptc.png"] = fig
 
     fig, ax = plt.subplots(figsize=(7, 5))
     for m, r in results.items():
-        p = np.asarray(r["series"]["photons_per_frame"])
-        snr = np.array([np.nan if x is None else x for x in r["series"]["snr"]], dtype=np.float64)
-        i_sat = r["measured"]["saturation_level_index"]
-        ok = np.isfinite(snr) & (snr > 0)
-        ok[i_sat + 1 :] = False
-        (line,) = ax.loglog(p[ok], snr[ok], "o", ms=3, label=f"stage {m}")
-        model = np.asarray(r["series"]["snr_model"])
-        ax.loglog(p[ok], model[ok], "-", color=line.get_color(), lw=0.8)
+        ok = np.isfinite(r.snr) & (r.snr > 0)
+        ok[r.measured.saturation.index + 1 :] = False
+        (line,) = ax.loglog(r.photons_per_frame[ok], r.snr[ok], "o", ms=3, label=f"stage {m}")
+        ax.loglog(r.photons_per_frame[ok], r.snr_model[ok], "-", color=line.get_color(), lw=0.8)
     ax.axhline(1.0, color="k", lw=0.5)
     ax.set_xlabel(r"$\mu_p$ per frame [photons/pixel]")
     ax.set_ylabel("SNR")
     ax.set_title("SNR vs irradiation (lines: linear model)")
     ax.grid(True, which="both", lw=0.3)
     ax.legend()
-    written["snr.png"] = _png(fig)
-    return written
+    figs["snr.png"] = fig
+    return figs
+
+
+SUMMARY_COLUMNS = (
+    "K_dn_per_e", "quantum_efficiency", "dark_temporal_noise_dn", "dark_temporal_noise_e",
+    "saturation_signal_dn", "saturation_capacity_e", "photons_sat", "photons_min",
+    "photons_min_model", "dynamic_range_db", "dynamic_range_db_model", "snr_max",
+)
+
+
+def _write_stage(
+    sdir: Path, cfg: BenchConfig, m: int, plan: PtcPlan, images: PtcImages, img_meta: dict[str, Any]
+) -> None:
+    """Stage ``m``'s 16-bit TIFF images and its EMVA 1288 descriptor into ``sdir``."""
+
+    def save(name: str, img: np.ndarray, photons: float, tag: str) -> str:
+        meta = {**img_meta, "stage": m, "photons": photons, "image": tag, "offset_dn": plan.offsets_dn[m]}
+        write_tiff16(sdir / name, img.astype(np.uint16), meta)
+        return name
+
+    bright: list[tuple[float, float, list[str]]] = []
+    dark: list[tuple[float, list[str]]] = []
+    exposure_ns = m * cfg.timing.t_int_s * 1e9
+    for idx, stack in enumerate(images.pairs[m]):
+        ph = float(m * plan.all_levels[idx])
+        kind = "dark" if idx == 0 else f"bright_{idx:03d}"
+        names = [save(f"images/{kind}_{tag}.tif", img, ph, tag) for tag, img in zip("ab", stack, strict=True)]
+        if idx == 0:
+            dark.append((exposure_ns, names))
+        else:
+            bright.append((exposure_ns, ph, names))
+    ph50 = float(m * plan.spatial_photons[m])
+    sp_bright = [
+        save(f"images/spatial_bright_{i:03d}.tif", img, ph50, f"spatial {i}")
+        for i, img in enumerate(images.spatial_bright[m])
+    ]
+    sp_dark = [
+        save(f"images/spatial_dark_{i:03d}.tif", img, 0.0, f"spatial {i}")
+        for i, img in enumerate(images.spatial_dark[m])
+    ]
+    write_emva_descriptor(
+        sdir / "emva1288.txt", bits=cfg.dtdi.beta_bits, width=plan.columns, height=plan.lines,
+        bright=[*bright, (exposure_ns, ph50, sp_bright)], dark=[*dark, (exposure_ns, sp_dark)],
+        metadata=img_meta,
+        title=f"EMVA 1288 descriptor: bench_sim photon-transfer series of DTDI stage {m}; "
+        "photons: mean photons per pixel summed over the stage's frames; exposure: ns",
+    )
+
+
+def write_ptc(
+    out: Path, cfg: BenchConfig, seed: int, plan: PtcPlan, images: PtcImages,
+    results: dict[int, StageResult],
+) -> dict[str, Any]:
+    """Write every file of the run into ``out`` as one set; returns ``ptc_results.json``'s dict."""
+    meta = provenance(cfg, seed)
+    img_meta = {k: v for k, v in meta.items() if k not in ("config", "versions")}
+    st, lines, cols = plan.stages, plan.lines, plan.columns
+    summary: dict[str, Any] = {
+        **meta,
+        "experiment": "ptc",
+        "stages": list(st),
+        "image_lines": lines,
+        "image_columns": cols,
+        "frames_per_level": 2 * lines + st[-1] - 1,
+        "t_int_s": cfg.timing.t_int_s,
+        "beta_bits": cfg.dtdi.beta_bits,
+        "subtract_black": cfg.dtdi.subtract_black,
+        "pedestal_dn": plan.pedestal_dn,
+        "configured_pedestal_dn": cfg.dtdi.pedestal_dn,
+        "levels": int(plan.all_levels.size),
+        "spatial_images": plan.spatial_images,
+        "notes": [
+            "Two images per level: lines 0..L-1 and L..2L-1 of one DTDI pass of "
+            "2L + max(stages) - 1 frames over the top-left max(stages) rows.",
+            "photons = mean photons per pixel summed over the m frames of stage m; exposure = "
+            "m * t_int.",
+            "The word pedestal keeps the dark signal unclipped (EMVA 1288): the configured "
+            "dtdi.pedestal_dn, raised where needed to 5 sigma of the highest stage's dark spread.",
+            "Saturation: maximum of the temporal variance, refined between levels (parabola); "
+            "dynamic_range_db_by_saturation_method gives the grid maximum (EMVA) and the "
+            "linear extrapolation to the clipped plateau as well.",
+        ],
+        "results": {str(m): r.as_dict() for m, r in results.items()},
+    }
+    figs = _plots(results)
+    files: list[str] = []
+    record = {"command": "ptc", **{k: meta[k] for k in ("version", "seed", "config_sha256")}}
+    with output_set(out, record) as tmp:
+        for m in st:
+            _write_stage(tmp / f"stage_{m:03d}", cfg, m, plan, images, img_meta)
+            files.append(f"stage_{m:03d}/emva1288.txt")
+
+        level_rows: list[list[Any]] = []
+        for m, r in results.items():
+            d = r.as_dict()["series"]
+            level_rows.append([m, 0, 0.0, 0.0, r.dark_mean_dn, r.dark_var_dn2, 0.0, ""])
+            for i in range(plan.levels.size):
+                snr_v = d["snr"][i]
+                level_rows.append([
+                    m, i + 1, d["photons_per_frame"][i], d["photons"][i], d["mean_dn"][i],
+                    d["var_dn2"][i], d["signal_dn"][i], "" if snr_v is None else float(snr_v),
+                ])
+        write_csv(
+            tmp / "ptc_levels.csv",
+            ["stage", "level", "photons_per_frame", "photons", "mean_dn", "var_dn2", "signal_dn", "snr"],
+            level_rows, meta,
+        )
+        rows = []
+        for m, r in results.items():
+            meas = r.measured.summary()
+            rows.append([
+                m, r.pedestal_dn, r.offset_dn, *[float(meas[c]) for c in SUMMARY_COLUMNS],
+                float(r.spatial["dsnu_e"]), float(r.spatial["prnu"]),
+            ])
+        header = ["stage", "pedestal_dn", "offset_dn", *SUMMARY_COLUMNS, "dsnu_e", "prnu"]
+        write_csv(tmp / "ptc_summary.csv", header, rows, meta)
+        files += ["ptc_levels.csv", "ptc_summary.csv"]
+        for name, fig in figs.items():
+            write_figure_png(tmp / name, fig, img_meta)
+            files.append(name)
+        files.append("ptc_results.json")
+        summary["files"] = files
+        write_json(tmp / "ptc_results.json", summary)
+    return summary
 
 
 def run_ptc(
@@ -306,7 +555,7 @@ def run_ptc(
     dense_levels: int = DEFAULT_DENSE_LEVELS,
     spatial_images: int = DEFAULT_SPATIAL_IMAGES,
 ) -> dict[str, Any]:
-    """Photon-transfer series of DTDI stages, EMVA 1288 files and bench_sim's own results.
+    """Photon-transfer series of DTDI stages: plan -> measure -> analyse -> write.
 
     Parameters
     ----------
@@ -317,11 +566,11 @@ def run_ptc(
     seed
         Seed of the run's one random generator (fixed pattern first, then temporal noise).
     out
-        Output folder (created; files of an earlier run in it are replaced).
+        Output folder (written as one set; an earlier bench_sim output there is replaced).
     lines, columns
         Image size ``L x C`` per image (default 64 x min(256, sensor.columns)).
     log_levels, dense_levels
-        Level grid (see :func:`plan_levels`; at least 30 log-spaced levels).
+        Level grid (at least 30 log-spaced levels, 3 dense ones per stage).
     spatial_images
         Images in the spatial (DSNU/PRNU) stacks, dark and at 50 % of each stage's saturation.
 
@@ -334,222 +583,15 @@ def run_ptc(
     ------
     BenchSimError
         A bad argument (stage outside ``1 .. rows``, ``beta_bits > 16``, negative seed, bad image
-        size, ``out`` an existing file), before anything is written.
+        size, ``out`` a file or a foreign non-empty folder), before anything is computed.
     """
-    out = Path(out)
-    st, cols = _validate(
-        cfg, stages, seed, out, lines, columns, log_levels, dense_levels, spatial_images
+    if not isinstance(seed, int | np.integer) or isinstance(seed, bool) or seed < 0:
+        raise BenchSimError(f"--seed = {seed!r}: must be an integer >= 0")
+    plan = plan_ptc(
+        cfg, stages, lines=lines, columns=columns, log_levels=log_levels, dense_levels=dense_levels,
+        spatial_images=spatial_images,
     )
-    sensor = cfg.sensor
-    t_int_s = cfg.timing.t_int_s
-    m_max = st[-1]
-    n_lines = int(lines)
-    n_spatial = int(spatial_images)
-    pedestals = ptc_pedestals(cfg, st)
-    levels = plan_levels(cfg, st, pedestals, log_levels, dense_levels)
-    all_levels = np.concatenate([[0.0], levels])  # level 0 = dark
-    n_frames = 2 * n_lines + m_max - 1
-    meta = _metadata(cfg, seed)
-
-    rng = np.random.default_rng(seed)
-    fixed = draw_fixed_pattern(sensor, rng).window(m_max, cols)
-
-    def _pass(p: float, rows: int, n_img: int, which: tuple[int, ...]) -> dict[int, np.ndarray]:
-        """One uniform-field pass; stage -> (n_img, L, C) images (consecutive line blocks)."""
-        frames = n_img * n_lines + max(which) - 1
-        photons = np.broadcast_to(np.float64(p), (frames, rows, cols))
-        imgs = sensor_dtdi_pass(
-            photons, sensor, cfg.dtdi, t_int_s, which, rng, fixed=fixed.window(rows, cols),
-            lines=n_img * n_lines, pedestal_dn={m: pedestals[m] for m in which},
-        )
-        return {m: imgs[m].reshape(n_img, n_lines, cols) for m in which}
-
-    # temporal series: a pair per level, every stage from the same pass
-    pairs: dict[int, list[np.ndarray]] = {m: [] for m in st}
-    for p in all_levels:
-        for m, stack in _pass(float(p), m_max, 2, st).items():
-            pairs[m].append(stack)
-    # spatial stacks: dark (all stages in one pass), bright at 50 % of each stage's saturation
-    spatial_dark = _pass(0.0, m_max, n_spatial, st)
-    p50 = {m: 0.5 * _stage_saturation_photons(cfg, m, pedestals[m]) for m in st}
-    spatial_bright = {m: _pass(p50[m], m, n_spatial, (m,))[m] for m in st}
-
-    k_cfg = sensor.conversion_gain_dn_per_e
-    sigma_d_px_e = dark_noise_e(sensor, t_int_s)
-    results: dict[int, dict[str, Any]] = {}
-    for m in st:
-        # quantisation noise of the stage: m pixel ADC roundings, or one of the output word
-        q_var = m * QUANTIZATION_VAR_DN2 if sensor.quantization else QUANTIZATION_VAR_DN2
-        mv = np.array([mean_var_from_pair(a, b) for a, b in pairs[m]])
-        dark_mean, dark_var = float(mv[0, 0]), float(mv[0, 1])
-        mean, var = mv[1:, 0], mv[1:, 1]
-        photons_stage = m * levels
-        res = analyse_photon_transfer(
-            photons_stage, mean, var, dark_mean, dark_var, quantization_var_dn2=q_var
-        )
-        signal = mean - dark_mean
-        std = np.sqrt(np.maximum(var, 0.0))
-        snr = snr_curve(signal, std)
-        dr_other = {
-            meth: dynamic_range_from_series(
-                np.concatenate([[0.0], photons_stage]), np.concatenate([[dark_mean], mean]),
-                np.concatenate([[math.sqrt(max(dark_var, 0.0))], std]), dark_signal=dark_mean,
-                saturation=meth, responsivity=res.responsivity_dn_per_photon,
-            ).dr_db
-            for meth in ("max_variance", "interpolated", "extrapolated")
-        }
-        spatial = spatial_nonuniformity(spatial_bright[m], spatial_dark[m], res.k_dn_per_e)
-        # linear model of the stage: m independent reads
-        mean_model, var_model = stage_mean_var_dn(levels, sensor, t_int_s, m)
-        dark_model, dark_var_model = stage_mean_var_dn(0.0, sensor, t_int_s, m)
-        snr_model = (mean_model - dark_model) / np.sqrt(var_model)
-        expected = {
-            "K_dn_per_e": k_cfg,
-            "quantum_efficiency": sensor.quantum_efficiency,
-            "dark_temporal_noise_e": math.sqrt(m) * sigma_d_px_e,
-            "dark_temporal_noise_dn": math.sqrt(float(dark_var_model)),
-            "saturation_photons_per_frame": _stage_saturation_photons(cfg, m, pedestals[m]),
-        }
-        results[m] = {
-            "stage": m,
-            "exposure_ns": m * t_int_s * 1e9,
-            "pedestal_dn": pedestals[m],
-            "measured": res.summary(),
-            "dynamic_range_db_by_saturation_method": dr_other,
-            "spatial": {**spatial, "photons_per_frame": p50[m], "images": n_spatial},
-            "per_frame": {
-                "photons_sat": res.photons_sat / m,
-                "photons_min": res.photons_min / m,
-                "photons_min_model": res.photons_min_model / m,
-            },
-            "expected": expected,
-            "relative_error": {
-                "K": res.k_dn_per_e / k_cfg - 1.0,
-                "dark_temporal_noise_e": (
-                    res.dark_temporal_noise_e / expected["dark_temporal_noise_e"] - 1.0
-                    if expected["dark_temporal_noise_e"] > 0
-                    else None
-                ),
-                "dark_temporal_noise_dn": (
-                    res.dark_temporal_noise_dn / expected["dark_temporal_noise_dn"] - 1.0
-                    if expected["dark_temporal_noise_dn"] > 0
-                    else None
-                ),
-            },
-            "dark": {"mean_dn": dark_mean, "var_dn2": dark_var},
-            "series": {
-                "photons_per_frame": levels.tolist(),
-                "photons": photons_stage.tolist(),
-                "mean_dn": mean.tolist(),
-                "var_dn2": var.tolist(),
-                "signal_dn": signal.tolist(),
-                "snr": [float(x) if np.isfinite(x) else None for x in snr],
-                "snr_model": snr_model.tolist(),
-            },
-        }
-
-    summary: dict[str, Any] = {
-        **meta,
-        "experiment": "ptc",
-        "stages": list(st),
-        "image_lines": n_lines,
-        "image_columns": cols,
-        "frames_per_level": n_frames,
-        "t_int_s": t_int_s,
-        "beta_bits": cfg.dtdi.beta_bits,
-        "subtract_black": cfg.dtdi.subtract_black,
-        "levels": len(all_levels),
-        "spatial_images": n_spatial,
-        "notes": [
-            "Two images per level: lines 0..L-1 and L..2L-1 of one DTDI pass of "
-            "2L + max(stages) - 1 frames over the top-left max(stages) rows.",
-            "photons = mean photons per pixel summed over the m frames of stage m; exposure = "
-            "m * t_int.",
-            "A pedestal per stage keeps the dark signal unclipped (EMVA 1288); it lowers the "
-            "stage's range by pedestal_dn.",
-            "Saturation: maximum of the temporal variance, refined between levels (parabola); "
-            "dynamic_range_db_by_saturation_method gives the grid maximum (EMVA) and the "
-            "linear extrapolation to the clipped plateau as well.",
-        ],
-        "results": {str(m): r for m, r in results.items()},
-    }
-    pngs = _plots(results, meta)
-
-    # ---- write (everything computed; each file atomically) ----
-    out.mkdir(parents=True, exist_ok=True)
-    img_meta = {k: v for k, v in meta.items() if k != "config"}
-    files: list[str] = []
-
-    def _save(sdir: Path, name: str, img: np.ndarray, m: int, photons: float, tag: str) -> str:
-        write_tiff16(
-            sdir / name, img.astype(np.uint16),
-            {**img_meta, "stage": m, "photons": photons, "image": tag},
-        )
-        return name
-
-    for m in st:
-        sdir = out / f"stage_{m:03d}"
-        bright: list[tuple[float, list[str]]] = []
-        dark: list[str] = []
-        for idx, stack in enumerate(pairs[m]):
-            ph = float(m * all_levels[idx])
-            kind = "dark" if idx == 0 else f"bright_{idx:03d}"
-            names = [
-                _save(sdir, f"images/{kind}_{tag}.tif", img, m, ph, tag)
-                for tag, img in zip("ab", stack, strict=True)
-            ]
-            if idx == 0:
-                dark = names
-            else:
-                bright.append((ph, names))
-        ph50 = float(m * p50[m])
-        sp_bright = [
-            _save(sdir, f"images/spatial_bright_{i:03d}.tif", img, m, ph50, f"spatial {i}")
-            for i, img in enumerate(spatial_bright[m])
-        ]
-        sp_dark = [
-            _save(sdir, f"images/spatial_dark_{i:03d}.tif", img, m, 0.0, f"spatial {i}")
-            for i, img in enumerate(spatial_dark[m])
-        ]
-        bright.append((ph50, sp_bright))
-        text = _descriptor_text(
-            m, cfg.dtdi.beta_bits, cols, n_lines, m * t_int_s * 1e9, bright, [dark, sp_dark], meta
-        )
-        _write_text(sdir / "emva1288.txt", text)
-        files.append(f"stage_{m:03d}/emva1288.txt")
-
-    level_rows = []
-    for m, r in results.items():
-        s = r["series"]
-        level_rows.append([m, 0, 0.0, 0.0, r["dark"]["mean_dn"], r["dark"]["var_dn2"], 0.0, ""])
-        for i in range(len(levels)):
-            snr_v = s["snr"][i]
-            level_rows.append([
-                m, i + 1, s["photons_per_frame"][i], s["photons"][i], s["mean_dn"][i],
-                s["var_dn2"][i], s["signal_dn"][i], "" if snr_v is None else float(snr_v),
-            ])
-    _write_text(out / "ptc_levels.csv", _csv_text(
-        ["stage", "level", "photons_per_frame", "photons", "mean_dn", "var_dn2", "signal_dn", "snr"],
-        level_rows, meta,
-    ))
-    summary_cols = [
-        "K_dn_per_e", "quantum_efficiency", "dark_temporal_noise_dn", "dark_temporal_noise_e",
-        "saturation_signal_dn", "saturation_capacity_e", "photons_sat", "photons_min",
-        "photons_min_model", "dynamic_range_db", "dynamic_range_db_model", "snr_max",
-    ]
-    _write_text(out / "ptc_summary.csv", _csv_text(
-        ["stage", "pedestal_dn", *summary_cols, "dsnu_e", "prnu"],
-        [[m, r["pedestal_dn"], *[float(r["measured"][c]) for c in summary_cols],
-          float(r["spatial"]["dsnu_e"]), float(r["spatial"]["prnu"])]
-         for m, r in results.items()],
-        meta,
-    ))
-    files += ["ptc_levels.csv", "ptc_summary.csv"]
-    for name, data in pngs.items():
-        with atomic_path(out / name) as tmp:
-            tmp.write_bytes(data)
-        files.append(name)
-    files.append("ptc_results.json")
-    summary["files"] = files
-    write_json(out / "ptc_results.json", summary)
-    return summary
+    out = check_output_dir(out)
+    images = measure_ptc(cfg, plan, int(seed))
+    results = analyse_ptc(cfg, plan, images)
+    return write_ptc(out, cfg, int(seed), plan, images, results)

@@ -114,7 +114,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     """Run the reproduction and write its outputs into ``out``. Returns ``metrics.json``'s dict."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from bench_sim.experiments.dynamic_range import measure_dynamic_range
+    from bench_sim.experiments.chain_dr import measure_chain_dynamic_range
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
     from bench_sim.fusion.tonemap import quantize_display, tone_map
     from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
@@ -175,9 +175,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     # eq. 16-17 count the values of the stored words; the HDR carries Gamma2's offset likewise
     eq18 = evaluate_eq18(g1, g2, fused.hdr + off2, mu1=mu1, mu2=mu2, beta=beta)
     clip = 2**beta - 1
-    dr = measure_dynamic_range(
-        cfg.sensor, cfg.dtdi, t_int, mu1, mu2, rng, **({"n_levels": 24} if quick else {})
-    )
+    dr = measure_chain_dynamic_range(cfg, rng, **({"n_levels": 24} if quick else {})).as_dict()
     panel = setup.grid.panel
     patches = _patch_slices(panel, setup.geom, cfg, lines)
     right = {k: v for k, v in patches.items() if k.startswith("wedge_right")}

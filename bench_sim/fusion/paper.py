@@ -41,8 +41,9 @@ from bench_sim.fusion.common import (
 __all__ = ["eq11_threshold_dn", "fuse_dtdi_hdr_eq11"]
 
 
-def eq11_threshold_dn(mu1: int, mu2: int, beta: int) -> float:
-    """Threshold on ``gamma1`` of eq. 11: ``Phi_FS / (mu2 / mu1)`` [DN, stage-``mu1`` units].
+def eq11_threshold_dn(mu1: int, mu2: int, beta: int, pedestal_dn: float = 0.0) -> float:
+    """Threshold on ``gamma1`` of eq. 11: ``Phi_FS / (mu2 / mu1)`` [DN, stage-``mu1`` units];
+    with a pedestal ``P`` in ``Gamma2``'s word, ``(Phi_FS - P) / (mu2 / mu1)`` on the signal.
 
     Parameters
     ----------
@@ -50,14 +51,16 @@ def eq11_threshold_dn(mu1: int, mu2: int, beta: int) -> float:
         DTDI stages, ``1 <= mu1 < mu2``.
     beta
         Output word length [bits]; ``Phi_FS = 2**beta`` (eq. 4).
+    pedestal_dn
+        Offset ``P`` of ``Gamma2``'s word [DN] (0: the paper's plain word).
 
     Returns
     -------
     float
-        ``2**beta * mu1 / mu2`` (e.g. 512 DN for ``mu1 = 10``, ``mu2 = 80``, ``beta = 12``).
+        ``(2**beta - P) * mu1 / mu2`` (e.g. 512 DN for ``mu1 = 10``, ``mu2 = 80``, ``beta = 12``).
     """
     mu1, mu2 = check_stage_pair(mu1, mu2)
-    return full_scale_dn(beta) * mu1 / mu2
+    return (full_scale_dn(beta) - float(pedestal_dn)) * mu1 / mu2
 
 
 def fuse_dtdi_hdr_eq11(
@@ -121,7 +124,7 @@ def fuse_dtdi_hdr_eq11(
     s1 = g1 - p1 if p1 else g1
     s2 = g2 - p2 if p2 else g2
     # eq. 5: gamma1 > Phi_FS / (mu2/mu1), as a product: exact for integer DN
-    use_low = s1 * mu2 > (phi_fs - p2) * mu1
+    use_low = s1 * mu2 > (phi_fs - p2) * mu1  # eq11_threshold_dn(mu1, mu2, beta, p2), as a product
     hdr = np.where(use_low, s1 * mu2 / mu1, s2)  # eq. 8 / eq. 10
     source = np.where(use_low, np.int32(mu1), np.int32(mu2)).astype(np.int32)
     return FusionResult(

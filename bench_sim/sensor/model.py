@@ -48,7 +48,10 @@ __all__ = [
     "stage_variance_dn2",
     "stage_mean_var_dn",
     "stage_dark_std_dn",
+    "stage_dsnu_dn",
+    "stage_prnu",
     "stage_saturation_photons",
+    "stage_clips_on_word",
     "photons_at_snr1",
     "stage_snr1_photons",
     "stage_dr_model_db",
@@ -239,20 +242,36 @@ def stage_mean_var_dn(
     return mean, var
 
 
-def stage_dark_std_dn(sensor: SensorConfig, t_int_s: float, stage: int) -> float:
-    """Model spread [DN] of the dark value of stage ``m`` over pixels and time.
+def stage_dsnu_dn(sensor: SensorConfig, t_int_s: float, stage: int) -> float:
+    """Spatial spread [DN] of the dark value of stage ``m`` over columns (its DSNU in DN).
 
-    ``sigma^2 = var_m(0) + m (K dsnu t)^2 + (m col)^2``: the temporal dark noise of ``m``
-    independent reads (:func:`stage_variance_dn2` at 0 photons) and the DSNU of ``m`` pixels add
-    incoherently; the column amplifier offset is the same in all ``m`` rows of a column, so it
-    adds coherently. Switched-off sources drop out.
+    Every line of a DTDI stage sums the same ``m`` pixels of its column, so the stage's fixed
+    pattern is a column pattern: the DSNU of ``m`` pixels adds incoherently,
+    ``m (K dsnu t)^2``; the column amplifier offset is the same in all ``m`` rows of a column
+    and adds coherently, ``(m col)^2``. Switched-off sources drop out. EMVA 1288's DSNU in
+    electrons is this divided by ``K``.
     """
     m = int(stage)
-    temporal = float(stage_mean_var_dn(0.0, sensor, t_int_s, m)[1])
     k = sensor.conversion_gain_dn_per_e
     dsnu = m * (k * sensor.dsnu_e_s * t_int_s) ** 2 if sensor.dsnu_enabled else 0.0
     col = (m * sensor.column_offset_dn) ** 2 if sensor.column_fpn else 0.0
-    return math.sqrt(temporal + dsnu + col)
+    return math.sqrt(dsnu + col)
+
+
+def stage_prnu(sensor: SensorConfig, stage: int) -> float:
+    """Relative spatial spread of the light signal of stage ``m`` over columns (its PRNU): the
+    mean gain of ``m`` independent pixels, ``prnu / sqrt(m)`` (0 with PRNU off)."""
+    return sensor.prnu / math.sqrt(int(stage)) if sensor.prnu_enabled else 0.0
+
+
+def stage_dark_std_dn(sensor: SensorConfig, t_int_s: float, stage: int) -> float:
+    """Model spread [DN] of the dark value of stage ``m`` over pixels and time.
+
+    ``sigma^2 = var_m(0) + DSNU_m^2``: the temporal dark noise of ``m`` independent reads
+    (:func:`stage_variance_dn2` at 0 photons) and the column pattern of :func:`stage_dsnu_dn`.
+    """
+    temporal = float(stage_mean_var_dn(0.0, sensor, t_int_s, int(stage))[1])
+    return math.sqrt(temporal + stage_dsnu_dn(sensor, t_int_s, stage) ** 2)
 
 
 def stage_saturation_photons(
@@ -271,13 +290,30 @@ def stage_saturation_photons(
     electrons, divided by ``eta``. This is where the linear response meets the clipped
     plateau; the variance maximum (EMVA 1288's saturation point) lies a few per cent below.
     """
+    e_word = _word_electrons_per_read(sensor, stage, beta_bits, subtract_black, pedestal_dn)
+    e_sat = min(pixel_saturation_electrons(sensor), e_word) - dark_electrons(sensor, t_int_s)
+    return max(e_sat, 1e-6) / sensor.quantum_efficiency
+
+
+def _word_electrons_per_read(
+    sensor: SensorConfig, stage: int, beta_bits: int, subtract_black: bool, pedestal_dn: float
+) -> float:
+    """Electrons per read at which the stage-``m`` word clips."""
     m = int(stage)
-    k = sensor.conversion_gain_dn_per_e
     word = word_clip_dn(beta_bits) - float(pedestal_dn)
     if not subtract_black:
         word -= m * sensor.black_offset_dn
-    e_sat = min(pixel_saturation_electrons(sensor), word / (m * k)) - dark_electrons(sensor, t_int_s)
-    return max(e_sat, 1e-6) / sensor.quantum_efficiency
+    return word / (m * sensor.conversion_gain_dn_per_e)
+
+
+def stage_clips_on_word(
+    sensor: SensorConfig, stage: int, *, beta_bits: int, subtract_black: bool = True, pedestal_dn: float = 0.0
+) -> bool:
+    """Whether stage ``m`` saturates on its output word (True) or on the pixel (False): the
+    word's clip in electrons per read lies below :func:`pixel_saturation_electrons`."""
+    return _word_electrons_per_read(sensor, stage, beta_bits, subtract_black, pedestal_dn) < (
+        pixel_saturation_electrons(sensor)
+    )
 
 
 def photons_at_snr1(eta: float, k_dn_per_e: float, dark_var_dn2: float) -> float:

@@ -1,0 +1,337 @@
+"""Measured dynamic range of ``Gamma1``, ``Gamma2`` and ``Gamma_HDR`` through the whole chain.
+
+A photon-transfer series (EMVA 1288): a uniform field at many levels, from dark to beyond the
+saturation of ``Gamma1``, goes through the sensor model, the streaming DTDI accumulator (the
+one uniform-field runner, :func:`bench_sim.experiments.uniform_field.expose_uniform`, with its
+one pedestal rule) and the paper's fusion (:func:`bench_sim.fusion.paper.fuse_dtdi_hdr_eq11`,
+offsets removed). Per level and image the mean and the temporal variance come from an image
+pair (:func:`bench_sim.metrics.emva1288.mean_var_from_pair`), and the dynamic range
+``20 lg(mu_p.sat / mu_p.min)`` from :func:`bench_sim.metrics.emva1288.dynamic_range_from_series`
+(``mu_p.min``: SNR = 1 on the measured SNR curve). The photon unit is mean photons per pixel per
+*frame* for all three images, so their DRs compare directly.
+
+Saturation point
+----------------
+The headline ``dr_db`` uses EMVA 1288's definition: the irradiation of the maximum of the
+temporal variance (``"interpolated"``: parabola through the grid maximum and its neighbours,
+after ``refine_rounds`` rounds of extra levels around it). The point where the linear response
+meets the clipped plateau (``"extrapolated"``, a few per cent higher, independent of the grid)
+is reported as well, labelled ``dr_db_extrapolated``.
+
+What the gains mean
+-------------------
+Below the eq. 11 threshold ``Gamma_HDR`` *is* ``Gamma2``, so the two share the SNR = 1 point;
+where both stages clip on the output word (not on the pixel) and carry the same offset, their
+saturation points differ by exactly ``mu2 / mu1``. The gain over ``Gamma2`` then equals
+``20 lg(mu2 / mu1)`` (eq. 15) *by construction* (exactly for the clip points, to a few tenths
+of a dB for the variance maxima): it confirms the code, not the method. The informative
+figure is the gain over the better input, ``Gamma1``: the saturation end is the same, and the
+noise floor drops by the read-noise ratio of the two stages (about ``sqrt(mu2 / mu1)``: read noise adds up as
+``sqrt(m)`` in the digital sum), so it is about ``10 lg(mu2 / mu1)``, not ``20 lg``.
+:attr:`ChainDR.gain_over_gamma2_by_construction` says whether the condition holds for the run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bench_sim.config import BenchConfig
+from bench_sim.errors import BenchSimError
+from bench_sim.experiments.uniform_field import (
+    expose_uniform,
+    measurement_offsets_dn,
+    measurement_pedestal_dn,
+)
+from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+from bench_sim.metrics.dynamic_range import dr_increase_eq15_db
+from bench_sim.metrics.emva1288 import SaturationMethod, dynamic_range_from_series, mean_var_from_pair
+from bench_sim.metrics.snr import snr_versus_signal
+from bench_sim.sensor.emva import draw_fixed_pattern
+from bench_sim.sensor.model import (
+    stage_clips_on_word,
+    stage_saturation_photons,
+    stage_snr1_photons,
+)
+
+__all__ = ["IMAGES", "ImageDR", "ChainDR", "default_levels", "measure_chain_dynamic_range"]
+
+#: The three images of the paper, in the order they are reported.
+IMAGES: tuple[str, ...] = ("gamma1", "gamma2", "hdr")
+
+
+@dataclass(frozen=True)
+class ImageDR:
+    """Measured dynamic range of one image type (photons per pixel per frame; DN).
+
+    ``dr_db``, ``photons_sat``, ``signal_sat_dn``: EMVA 1288 saturation (variance maximum);
+    ``dr_db_extrapolated``, ``photons_sat_extrapolated``: the linear response meeting the
+    plateau. ``mean_dn`` (offset removed; HDR in stage-``mu2`` units), ``temporal_std_dn`` and
+    ``snr`` per level of the series.
+    """
+
+    dr_db: float
+    photons_min: float
+    photons_sat: float
+    signal_sat_dn: float
+    dr_db_extrapolated: float
+    photons_sat_extrapolated: float
+    mean_dn: np.ndarray = field(repr=False)
+    temporal_std_dn: np.ndarray = field(repr=False)
+    snr: np.ndarray = field(repr=False)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "dr_db": self.dr_db,
+            "photons_min": self.photons_min,
+            "photons_sat": self.photons_sat,
+            "signal_sat_dn": self.signal_sat_dn,
+            "dr_db_extrapolated": self.dr_db_extrapolated,
+            "photons_sat_extrapolated": self.photons_sat_extrapolated,
+            "mean_dn": self.mean_dn.tolist(),
+            "temporal_std_dn": self.temporal_std_dn.tolist(),
+            "snr": [float(x) if np.isfinite(x) else None for x in self.snr],
+        }
+
+
+@dataclass(frozen=True)
+class ChainDR:
+    """Result of :func:`measure_chain_dynamic_range`."""
+
+    mu1: int
+    mu2: int
+    beta_bits: int
+    adc_bits: int
+    t_int_s: float
+    lines: int
+    columns: int
+    pedestal_dn: int
+    offsets_dn: dict[int, float]
+    photons: np.ndarray = field(repr=False)
+    images: dict[str, ImageDR] = field(repr=False)
+    stage_clips_on_word: dict[int, bool] = field(default_factory=dict)
+    model_dr_db: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def dr_db(self) -> dict[str, float]:
+        """Headline DR [dB] per image (EMVA 1288 saturation)."""
+        return {k: v.dr_db for k, v in self.images.items()}
+
+    @property
+    def eq15_db(self) -> float:
+        """Eq. 15, ``20 lg(mu2 / mu1)`` [dB]."""
+        return dr_increase_eq15_db(self.mu1, self.mu2)
+
+    @property
+    def gain_over_gamma1_db(self) -> float:
+        """``DR(HDR) - DR(Gamma1)`` [dB]: the gain over the better-exposed input's noise floor."""
+        return self.images["hdr"].dr_db - self.images["gamma1"].dr_db
+
+    @property
+    def gain_over_gamma2_db(self) -> float:
+        """``DR(HDR) - DR(Gamma2)`` [dB]."""
+        return self.images["hdr"].dr_db - self.images["gamma2"].dr_db
+
+    @property
+    def gain_over_gamma2_by_construction(self) -> bool:
+        """True when both stages clip on the output word with the same offset: the gain over
+        ``Gamma2`` is then ``20 lg(mu2/mu1)`` by construction (see the module doc)."""
+        clips = self.stage_clips_on_word
+        same_offset = self.offsets_dn.get(self.mu1) == self.offsets_dn.get(self.mu2)
+        return bool(clips.get(self.mu1)) and bool(clips.get(self.mu2)) and same_offset
+
+    @property
+    def level_step_db_max(self) -> float:
+        p = self.photons[self.photons > 0]
+        steps = np.diff(np.log10(p))
+        return float(20.0 * steps.max()) if steps.size else float("nan")
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (``metrics.json``'s ``dr_details``)."""
+        return {
+            "mu1": self.mu1,
+            "mu2": self.mu2,
+            "beta_bits": self.beta_bits,
+            "adc_bits": self.adc_bits,
+            "t_int_s": self.t_int_s,
+            "lines": self.lines,
+            "columns": self.columns,
+            "pedestal_dn": self.pedestal_dn,
+            "offset_dn": {str(m): v for m, v in self.offsets_dn.items()},
+            "saturation": "EMVA 1288: maximum of the temporal variance (parabola between levels)",
+            "saturation_extrapolated": "linear response meets the clipped plateau",
+            "photon_unit": "mean photons per pixel per frame",
+            "level_step_db_max": self.level_step_db_max,
+            "photons": self.photons.tolist(),
+            "images": {k: v.as_dict() for k, v in self.images.items()},
+            "dr_db": self.dr_db,
+            "dr_db_extrapolated": {k: v.dr_db_extrapolated for k, v in self.images.items()},
+            "model_dr_db": dict(self.model_dr_db),
+            "delta_db_vs_gamma1": self.gain_over_gamma1_db,
+            "delta_db_vs_gamma2": self.gain_over_gamma2_db,
+            "delta_db_vs_gamma2_extrapolated": self.images["hdr"].dr_db_extrapolated
+            - self.images["gamma2"].dr_db_extrapolated,
+            "stage_clips_on_word": {str(m): v for m, v in self.stage_clips_on_word.items()},
+            "gain_over_gamma2_by_construction": self.gain_over_gamma2_by_construction,
+            "eq15_db": self.eq15_db,
+        }
+
+
+def _stage_sat(cfg: BenchConfig, m: int, pedestal_dn: float) -> float:
+    return stage_saturation_photons(
+        cfg.sensor, cfg.timing.t_int_s, m, beta_bits=cfg.dtdi.beta_bits,
+        subtract_black=cfg.dtdi.subtract_black, pedestal_dn=pedestal_dn,
+    )
+
+
+def default_levels(
+    cfg: BenchConfig, mu1: int, mu2: int, pedestal_dn: float, n_levels: int = 40
+) -> np.ndarray:
+    """Photon levels of the series: 0 (dark) and ``n_levels`` geometric levels [photons/pixel/frame],
+    from a quarter of stage ``mu2``'s SNR = 1 point to twice stage ``mu1``'s saturation (model,
+    :mod:`bench_sim.sensor.model`; it only places the levels)."""
+    p_lo = 0.25 * stage_snr1_photons(cfg.sensor, cfg.timing.t_int_s, mu2)
+    p_hi = 2.0 * _stage_sat(cfg, mu1, pedestal_dn)
+    return np.concatenate([[0.0], np.geomspace(p_lo, p_hi, n_levels)])
+
+
+def _series(
+    cfg: BenchConfig, mu1: int, mu2: int, levels: np.ndarray, rng: np.random.Generator, fixed: Any,
+    lines: int, columns: int, pedestal: int, offsets: dict[int, float],
+) -> dict[str, np.ndarray]:
+    """Per image: (levels, 2) array of (mean [DN], temporal variance [DN^2]), offsets removed."""
+    stats = {name: np.zeros((levels.size, 2)) for name in IMAGES}
+    for li, level in enumerate(levels):
+        st = expose_uniform(
+            cfg, (mu1, mu2), float(level), rng, fixed=fixed, lines=lines, columns=columns, images=2,
+            pedestal_dn=pedestal,
+        )
+        g1 = st[mu1].reshape(2 * lines, columns)
+        g2 = st[mu2].reshape(2 * lines, columns)
+        fused = fuse_dtdi_hdr_eq11(
+            g1, g2, mu1=mu1, mu2=mu2, beta=cfg.dtdi.beta_bits, pedestal_dn=(offsets[mu1], offsets[mu2])
+        )
+        images = {"gamma1": g1 - offsets[mu1], "gamma2": g2 - offsets[mu2], "hdr": fused.hdr}
+        for name, img in images.items():
+            stats[name][li] = mean_var_from_pair(img[:lines], img[lines:])
+    return stats
+
+
+def measure_chain_dynamic_range(
+    cfg: BenchConfig,
+    seed: int | np.random.SeedSequence | np.random.Generator,
+    *,
+    mu1: int | None = None,
+    mu2: int | None = None,
+    levels: np.ndarray | None = None,
+    n_levels: int = 40,
+    lines: int = 32,
+    columns: int = 64,
+    saturation: SaturationMethod = "interpolated",
+    refine_rounds: int = 2,
+    refine_points: int = 8,
+) -> ChainDR:
+    """Measured DR (EMVA 1288) of ``Gamma1``, ``Gamma2``, ``Gamma_HDR`` through the whole chain.
+
+    Parameters
+    ----------
+    cfg
+        Bench config: sensor, timing, DTDI (word, pedestal) and the fused stages
+        (``fusion.mu1``, ``fusion.mu2`` unless given).
+    seed
+        Seed of the measurement's random generator (a ``Generator`` is used as is): fixed
+        pattern first, then the temporal noise of the levels in order.
+    mu1, mu2
+        Stages fused (default: the config's).
+    levels
+        Photon levels [photons/pixel/frame], strictly increasing (the dark level 0 is added if
+        missing); default :func:`default_levels` with ``n_levels`` lit levels.
+    lines, columns
+        Image size per level (two images each).
+    saturation
+        Definition of ``mu_p.sat`` for the headline ``dr_db`` (EMVA's ``"interpolated"`` variance
+        maximum by default; ``"extrapolated"`` is always reported as well).
+    refine_rounds, refine_points
+        For the variance-maximum definitions: rounds of ``refine_points`` extra levels between
+        the neighbours of each image's variance maximum.
+    """
+    mu1 = cfg.fusion.mu1 if mu1 is None else int(mu1)
+    mu2 = cfg.fusion.mu2 if mu2 is None else int(mu2)
+    if not 1 <= mu1 < mu2 <= cfg.sensor.rows:
+        raise BenchSimError(f"mu1 = {mu1}, mu2 = {mu2}: need 1 <= mu1 < mu2 <= sensor.rows")
+    if not (isinstance(lines, int) and lines >= 1 and isinstance(columns, int) and columns >= 1):
+        raise BenchSimError(f"lines = {lines!r}, columns = {columns!r}: need integers >= 1")
+    if lines * columns < 2 or columns > cfg.sensor.columns:
+        raise BenchSimError(f"lines x columns = {lines} x {columns}: need >= 2 pixels within the sensor")
+    if saturation not in ("extrapolated", "interpolated", "max_variance"):
+        raise BenchSimError(
+            f"saturation = {saturation!r}: allowed 'extrapolated', 'interpolated', 'max_variance'"
+        )
+    pedestal = measurement_pedestal_dn(cfg, (mu1, mu2))
+    offsets = measurement_offsets_dn(cfg, (mu1, mu2), pedestal)
+    if levels is None:
+        levels = default_levels(cfg, mu1, mu2, pedestal, n_levels)
+    p = np.union1d([0.0], np.asarray(levels, dtype=np.float64))
+    if p[0] < 0 or not np.all(np.isfinite(p)):
+        raise BenchSimError("levels: need finite photon levels >= 0")
+    rng = np.random.default_rng(seed)
+    fixed = draw_fixed_pattern(cfg.sensor, rng)
+    args = (rng, fixed, lines, columns, pedestal, offsets)
+    stats = _series(cfg, mu1, mu2, p, *args)
+    if saturation != "extrapolated":
+        for _ in range(refine_rounds):
+            extra: list[np.ndarray] = []
+            for name in IMAGES:
+                i = int(np.argmax(stats[name][:, 1]))
+                lo, hi = p[max(i - 1, 0)], p[min(i + 1, p.size - 1)]
+                if hi > lo:
+                    extra.append(np.linspace(lo, hi, refine_points + 2)[1:-1])
+            new = np.setdiff1d(np.unique(np.concatenate(extra)), p) if extra else np.array([])
+            if not new.size:
+                break
+            more = _series(cfg, mu1, mu2, new, *args)
+            allp = np.concatenate([p, new])
+            order = np.argsort(allp, kind="stable")
+            p = allp[order]
+            stats = {k: np.concatenate([stats[k], more[k]])[order] for k in IMAGES}
+    images: dict[str, ImageDR] = {}
+    for name in IMAGES:
+        mean = stats[name][:, 0]
+        std = np.sqrt(np.maximum(stats[name][:, 1], 0.0))
+        dark = float(mean[0])
+        main = dynamic_range_from_series(p, mean, std, dark_signal=dark, saturation=saturation)
+        ext = dynamic_range_from_series(p, mean, std, dark_signal=dark, saturation="extrapolated")
+        images[name] = ImageDR(
+            dr_db=main.dr_db,
+            photons_min=main.photons_min,
+            photons_sat=main.photons_sat,
+            signal_sat_dn=main.signal_sat,
+            dr_db_extrapolated=ext.dr_db,
+            photons_sat_extrapolated=ext.photons_sat,
+            mean_dn=mean,
+            temporal_std_dn=std,
+            snr=snr_versus_signal(mean, std, dark)[1],
+        )
+    # where each stage clips: on the word (below the pixel's clip) or on the pixel
+    t = cfg.timing.t_int_s
+    clips = {
+        m: stage_clips_on_word(
+            cfg.sensor, m, beta_bits=cfg.dtdi.beta_bits, subtract_black=cfg.dtdi.subtract_black,
+            pedestal_dn=pedestal,
+        )
+        for m in (mu1, mu2)
+    }
+    snr1 = {m: stage_snr1_photons(cfg.sensor, t, m) for m in (mu1, mu2)}
+    sat = {m: _stage_sat(cfg, m, pedestal) for m in (mu1, mu2)}
+    model = {
+        "gamma1": 20 * np.log10(sat[mu1] / snr1[mu1]),
+        "gamma2": 20 * np.log10(sat[mu2] / snr1[mu2]),
+        "hdr": 20 * np.log10(sat[mu1] / snr1[mu2]),
+    }
+    return ChainDR(
+        mu1=mu1, mu2=mu2, beta_bits=cfg.dtdi.beta_bits, adc_bits=cfg.sensor.adc_bits, t_int_s=t,
+        lines=lines, columns=columns, pedestal_dn=pedestal, offsets_dn=offsets, photons=p,
+        images=images, stage_clips_on_word=clips, model_dr_db={k: float(v) for k, v in model.items()},
+    )
