@@ -1,0 +1,176 @@
+"""``bench_sim.simulate``: stage images with their exact ground truth (issue 9)."""
+
+from __future__ import annotations
+
+import hashlib
+import tomllib
+
+import numpy as np
+import pytest
+
+import bench_sim
+from bench_sim.config import config_from_dict
+from bench_sim.errors import BenchSimError
+from bench_sim.sensor import stage_mean_var_dn
+from tests.conftest import ALL_OFF, TINY
+
+NOISE_OFF = dict(ALL_OFF)
+TEMPORAL_OFF = dict(shot_noise=False, dark_noise=False, read_noise=False, quantization=False)
+
+#: the fill light alone: a uniformly lit field
+FILL_ONLY = {"strong": {"enabled": False}, "weak": {"irradiance_w_m2": 1.0}}
+
+
+def _overrides(**sections):
+    out = {k: dict(v) for k, v in TINY.items()}
+    out["lines"] = 48
+    for k, v in sections.items():
+        if isinstance(v, dict):
+            out[k] = {**out.get(k, {}), **v}
+        else:
+            out[k] = v
+    return out
+
+
+def _subpixel_shift(a: np.ndarray, b: np.ndarray) -> float:
+    """Lag [samples] at which ``b`` best matches ``a`` (``b(x) ~ a(x - lag)``): the peak of their
+    cross-correlation, refined by a parabola through the three samples around it."""
+    a = a - a.mean()
+    b = b - b.mean()
+    xc = np.correlate(b, a, mode="full")
+    k = int(np.argmax(xc))
+    y0, y1, y2 = xc[k - 1], xc[k], xc[k + 1]
+    return k - (len(a) - 1) + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
+
+
+# --- must show 1: dn equals mean_dn without noise, with and without sync error -------------------
+
+
+@pytest.mark.parametrize("sync_error", [0.0, 0.05])
+@pytest.mark.parametrize("sensor_switches", [NOISE_OFF, TEMPORAL_OFF], ids=["all-off", "fixed-patterns-on"])
+def test_dn_is_mean_dn_without_noise(sync_error, sensor_switches):
+    ds = bench_sim.simulate(
+        _overrides(sensor=sensor_switches, timing={"sync_error": sync_error}), stages=[1, 2, 7, 12]
+    )
+    assert list(ds.stage.values) == [1, 2, 7, 12]
+    for m in ds.stage.values:
+        d = ds.sel(stage=m)
+        dn, mean = d.dn.values.astype(np.float64), d.mean_dn.values
+        ok = ~d.clipped.values
+        assert ok.mean() > 0.5  # the tiny bench's spot saturates part of the field
+        # the stage word rounds once: |dn - E[dn]| <= 1/2, and dn is E[dn] rounded
+        assert np.abs(dn - mean)[ok].max() <= 0.5 + 1e-9
+        tie = np.abs(np.abs(mean - np.floor(mean)) - 0.5) < 1e-6
+        assert np.array_equal(dn[ok & ~tie], np.rint(mean[ok & ~tie]))
+        # where the word clips, the expectation lies above the clip value
+        top = 2 ** ds.attrs["beta_bits"] - 1
+        assert np.all(mean[dn >= top] > top - 0.5)
+
+
+# --- must show 2: the temporal variance of dn - mean_dn per stage ---------------------------------
+
+
+@pytest.mark.parametrize("lit", [True, False], ids=["uniform-fill", "dark"])
+def test_temporal_variance_grows_as_closed_form(lit):
+    lights = FILL_ONLY if lit else {"strong": {"enabled": False}, "weak": {"enabled": False}}
+    ov = _overrides(
+        lines=256,
+        sensor={"columns": 128},
+        target={"layout": "uniform", "panel_columns": 128},
+        lights=lights,
+        dtdi={"subtract_black": False},  # the dark words keep m * b: no clipping at 0
+    )
+    cfg = config_from_dict(ov)
+    stages = [1, 3, 12]
+    ds = bench_sim.simulate(cfg, stages=stages, seed=11)
+    t_int = cfg.timing.t_int_s
+    sd = []
+    for m in stages:
+        d = ds.sel(stage=m)
+        assert not d.clipped.values.any()
+        resid = d.dn.values.astype(np.float64) - d.mean_dn.values
+        per_frame = d.photons.values / m
+        _, var = stage_mean_var_dn(per_frame, cfg.sensor, t_int, m, subtract_black=False)
+        # the residual has mean 0 and the closed-form variance; 5 sigma of the sample variance
+        n = resid.size
+        assert abs(resid.mean()) < 5 * np.sqrt(var.mean() / n)
+        assert resid.var() == pytest.approx(var.mean(), rel=5 * np.sqrt(2 / n))
+        sd.append(resid.std())
+    if not lit:  # only read and dark noise: the standard deviation grows as sqrt(m)
+        assert sd[2] / sd[0] == pytest.approx(np.sqrt(12), rel=0.05)
+        assert sd[1] / sd[0] == pytest.approx(np.sqrt(3), rel=0.05)
+
+
+# --- must show 3: under sync error, truth follows the stage ------------------------------------
+
+
+def test_sync_error_edges_of_dn_and_reflectance_coincide():
+    ov = _overrides(
+        lines=120,
+        sensor={"rows": 80, "columns": 256},
+        target={"panel_lines": 128, "panel_columns": 256},
+        lights={"strong": {"enabled": False}, "weak": {"irradiance_w_m2": 12.0}},
+        timing={"sync_error": 0.05},
+        fusion={"mu1": 10, "mu2": 80},
+    )
+    ds = bench_sim.simulate(ov, stages=[1, 80], seed=3)
+    # the step wedge of the left half panel: reflectance steps along the track (its first edge,
+    # at the top of the image, is left out)
+    w = config_from_dict(ov).target.panel_columns / 2.0
+    cols = slice(int(0.03 * w) + 2, int(0.23 * w) - 1)
+    prof = {}
+    for m in (1, 80):
+        d = ds.sel(stage=m)
+        assert not d.clipped.values[:, cols].any()
+        prof[m] = {
+            k: np.diff(np.asarray(d[k].values[10:, cols], dtype=np.float64).mean(axis=1))
+            for k in ("dn", "reflectance")
+        }
+    # in each stage the edges in dn and in its truth coincide
+    for m in (1, 80):
+        assert abs(_subpixel_shift(prof[m]["reflectance"], prof[m]["dn"])) < 0.1
+    # and stage 80's moved against stage 1's: row i of stage m reads line j's material plus
+    # i * e object pixels further along the track (to larger lines: a negative lag)
+    for k in ("dn", "reflectance"):
+        assert _subpixel_shift(prof[1][k], prof[80][k]) < -1.0
+
+
+# --- dataset contract ----------------------------------------------------------------------------
+
+
+def test_dataset_variables_units_and_provenance():
+    ds = bench_sim.simulate(_overrides(), stages=[2, 8], seed=5)
+    assert dict(ds.sizes) == {"stage": 2, "line": 48, "column": 48}
+    for name in ("dn", "mean_dn", "photons", "reflectance", "clipped", "hdr", "hdr_source"):
+        assert ds[name].attrs["units"] and ds[name].attrs["long_name"], name
+    assert np.issubdtype(ds.dn.dtype, np.integer) and ds.clipped.dtype == bool
+    assert ds.hdr.dims == ("line", "column")
+    cfg = config_from_dict(tomllib.loads(ds.attrs["config"]))
+    assert cfg == config_from_dict(_overrides())
+    assert ds.attrs["config_sha256"] == hashlib.sha256(
+        __import__("json").dumps(cfg.model_dump(mode="json", exclude_none=True), sort_keys=True).encode()
+    ).hexdigest()
+    assert (ds.attrs["seed"], ds.attrs["version"]) == (5, bench_sim.__version__)
+    assert ds.attrs["engine"] == "fast" and ds.attrs["variant"]
+    # truth is physical: reflectance in 0..1, photons >= 0, words clip only at the top
+    assert 0 <= float(ds.reflectance.min()) and float(ds.reflectance.max()) <= 1
+    assert float(ds.photons.min()) >= 0
+
+
+def test_same_seed_same_data_and_no_hdr_without_both_stages():
+    a = bench_sim.simulate(_overrides(), stages=[3], seed=9)
+    b = bench_sim.simulate(_overrides(), stages=[3], seed=9)
+    c = bench_sim.simulate(_overrides(), stages=[3], seed=10)
+    assert a.identical(b)
+    assert not np.array_equal(a.dn.values, c.dn.values)
+    assert "hdr" not in a and "hdr_source" not in a
+
+
+@pytest.mark.parametrize(
+    "stages, what",
+    [([0, 2], "outside 1..12"), ([2, 13], "outside 1..12"), ([2, 2], "given twice"), ([], "at least one")],
+)
+def test_bad_stages_raise_one_line(stages, what):
+    with pytest.raises(BenchSimError, match=what) as exc:
+        bench_sim.simulate(_overrides(), stages=stages)
+    assert "\n" not in str(exc.value)
