@@ -136,7 +136,11 @@ class TargetConfig(_Section):
     it repeats around the drum circumference (rounded so an integer number of panels fits).
     """
 
-    layout: Literal["paper", "uniform"] = "paper"
+    layout: Literal["paper", "uniform", "image", "dead_leaves", "slanted_edges", "random_bars"] = Field(
+        "paper",
+        description="'paper', 'uniform', 'image' (target.image), or generated from the run's seed: "
+        "'dead_leaves', 'slanted_edges', 'random_bars' (see bench_sim.rig.target_sources)",
+    )
     panel_lines: Annotated[int, Field(ge=16, le=65536)] = 1024
     panel_columns: Annotated[int, Field(ge=16, le=65536)] = 1024
     texels_per_pixel: Annotated[int, Field(ge=1, le=16)] = 4
@@ -151,6 +155,37 @@ class TargetConfig(_Section):
         "(glints; reference engine only)",
     )
     gloss_roughness: Annotated[float, Field(gt=0, le=1)] = 0.1
+    # layout = "image" and the generated layouts (bench_sim.rig.target_sources)
+    image: str | None = Field(
+        None,
+        description="layout 'image': reflectance map file (8/16-bit PNG/TIFF, float TIFF, EXR, NPY), "
+        "relative to the config file that names it",
+    )
+    image_encoding: Literal["srgb", "linear"] | None = Field(
+        None, description="transfer function of the image values; default: srgb for integer files, "
+        "linear for float files"
+    )
+    image_channel: str = Field(
+        "luminance", description="'luminance' (Rec. 709 of linear RGB) or one channel: R, G, B, A, "
+        "or an EXR channel name"
+    )
+    image_fit: Literal["stretch", "tile", "crop"] = Field(
+        "stretch", description="stretch: whole image onto the panel; crop: cover, aspect kept, centre "
+        "kept; tile: one image pixel per object pixel, repeated"
+    )
+    dead_leaves_radius_min_px: PositiveFloat = Field(1.0, description="smallest disc radius [object px]")
+    dead_leaves_radius_max_px: PositiveFloat = Field(64.0, description="largest disc radius [object px]")
+    edge_angle_deg: Annotated[float, Field(ge=0, le=45)] = Field(
+        5.0, description="slanted_edges: mean angle of the edges to the lines / columns [deg]"
+    )
+    edge_angle_jitter_deg: Annotated[float, Field(ge=0, le=45)] = Field(
+        1.0, description="slanted_edges: each square's angle is uniform in mean +- jitter [deg]"
+    )
+    edge_cell_px: Annotated[int, Field(ge=8, le=65536)] = Field(
+        64, description="slanted_edges: cell of one slanted square [object px]"
+    )
+    bar_width_min_px: PositiveFloat = Field(2.0, description="random_bars: narrowest bar [object px]")
+    bar_width_max_px: PositiveFloat = Field(24.0, description="random_bars: widest bar [object px]")
 
     @model_validator(mode="after")
     def _range(self) -> TargetConfig:
@@ -158,6 +193,22 @@ class TargetConfig(_Section):
             raise ValueError(
                 f"reflectance_min = {self.reflectance_min} must be below reflectance_max = "
                 f"{self.reflectance_max}"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _sources(self) -> TargetConfig:
+        if self.layout == "image" and not self.image:
+            raise ValueError("layout = 'image' needs target.image (a reflectance map file)")
+        if self.dead_leaves_radius_min_px >= self.dead_leaves_radius_max_px:
+            raise ValueError(
+                f"dead_leaves_radius_min_px = {self.dead_leaves_radius_min_px} must be below "
+                f"dead_leaves_radius_max_px = {self.dead_leaves_radius_max_px}"
+            )
+        if self.bar_width_min_px > self.bar_width_max_px:
+            raise ValueError(
+                f"bar_width_min_px = {self.bar_width_min_px} must not exceed bar_width_max_px = "
+                f"{self.bar_width_max_px}"
             )
         return self
 
@@ -426,6 +477,9 @@ def _read_toml(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config error: {path}: not valid TOML ({exc})") from exc
+    image = data.get("target", {}).get("image") if isinstance(data.get("target"), dict) else None
+    if isinstance(image, str) and image and not Path(image).is_absolute():
+        data["target"]["image"] = str((path.parent / image).resolve())  # relative to this file
     base = data.pop("base", None)
     if base is None:
         return data

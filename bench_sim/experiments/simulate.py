@@ -363,4 +363,6 @@ def simulate(
 def check_inputs(cfg: BenchConfig) -> None:
     """Check everything a pass reads besides the config itself (target image files) before any
     rendering; raises :class:`BenchSimError` naming the file and the problem."""
-    return None
+    from bench_sim.rig.target_sources import check_target_image
+
+    check_target_image(cfg.target)
