@@ -247,3 +247,89 @@ def test_image_target_round_trips(tmp_path):
         ratio = (d.mean_dn.values / d.reflectance.values)[inner]
         dev = np.abs(ratio / np.median(ratio) - 1)
         assert dev.max() < cos4_spread + 0.02 and dev.mean() < cos4_spread + 0.002
+
+
+# --- the command ----------------------------------------------------------------------------------
+
+
+def _tiny_toml(tmp_path, extra: str = "") -> str:
+    from bench_sim.config import DEFAULT_CONFIG_PATH
+
+    path = tmp_path / "tiny.toml"
+    path.write_text(
+        f'base = "{DEFAULT_CONFIG_PATH}"\nlines = 24\n[sensor]\nrows = 12\ncolumns = 48\n'
+        "[target]\npanel_lines = 96\npanel_columns = 48\n" + extra + "[fusion]\nmu1 = 2\nmu2 = 8\n"
+    )
+    return str(path)
+
+
+@pytest.mark.parametrize("fmt", ["zarr", "netcdf", "tiff"])
+def test_cli_writes_each_format(tmp_path, fmt):
+    import json
+
+    import tifffile
+    import xarray as xr
+    from typer.testing import CliRunner
+
+    from bench_sim.cli import app
+
+    out = tmp_path / "out"
+    res = CliRunner().invoke(
+        app, ["simulate", _tiny_toml(tmp_path), "--stages", "2,8", "--seed", "4", "--out", str(out),
+              "--format", fmt],
+    )
+    assert res.exit_code == 0, res.output
+    ref = bench_sim.simulate(_tiny_toml(tmp_path), stages=[2, 8], seed=4)
+    if fmt == "zarr":
+        ds = xr.open_zarr(out / "simulation.zarr").load()
+        assert ds.identical(ref)
+    elif fmt == "netcdf":
+        ds = xr.open_dataset(out / "simulation.nc").load()
+        assert ds.identical(ref)
+    else:
+        meta = json.loads((out / "meta.json").read_text())
+        assert meta["seed"] == 4 and meta["version"] == bench_sim.__version__ and meta["config_sha256"]
+        for m in (2, 8):
+            for var in ("dn", "mean_dn", "photons", "reflectance", "clipped"):
+                name = f"stage_{m:03d}_{var}.tiff"
+                arr = tifffile.imread(out / name)
+                assert arr.dtype.itemsize == 4 and meta["files"][name]["units"]
+                np.testing.assert_allclose(arr, ref[var].sel(stage=m).values, rtol=1e-6)
+        assert (out / "hdr.tiff").is_file() and (out / "hdr_source.tiff").is_file()
+
+
+@pytest.mark.parametrize(
+    "args, extra, problem",
+    [
+        (["--stages", "0,8"], "", "stage 0 outside 1..12"),
+        (["--stages", "2,13"], "", "stage 13 outside 1..12"),
+        (["--stages", "8,2,8"], "", "stage 8 is given twice"),
+        (["--stages", "two"], "", "expected 'all' or comma-separated"),
+        (["--format", "hdf5"], "", "--format = 'hdf5'"),
+        ([], '[target]\nlayout = "image"\nimage = "missing.png"\n', "missing.png'?: no such file"),
+        ([], '[target]\nlayout = "image"\nimage = "broken.png"\n', "broken.png'?: cannot read"),
+        ([], '[target]\nlayout = "image"\nimage = "nan.npy"\n', "nan.npy'?: contains NaN"),
+        ([], '[target]\nlayout = "image"\nimage = "big.npy"\n', "big.npy'?: float values"),
+    ],
+)
+def test_cli_bad_input_one_line_exit_2_nothing_written(tmp_path, args, extra, problem):
+    from typer.testing import CliRunner
+
+    from bench_sim.cli import app
+
+    (tmp_path / "broken.png").write_bytes(b"\x89PNG not really")
+    np.save(tmp_path / "nan.npy", np.array([[0.1, np.nan]]))
+    np.save(tmp_path / "big.npy", np.array([[0.1, 2.0]]))
+    cfg = _tiny_toml(tmp_path)
+    if extra:  # a config on top of the tiny one, naming the image
+        (tmp_path / "img.toml").write_text(f'base = "tiny.toml"\n{extra}')
+        cfg = str(tmp_path / "img.toml")
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["simulate", cfg, "--out", str(out), "--stages", "2,8", *args])
+    assert res.exit_code == 2, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("bench-sim: error:")
+    import re
+
+    assert re.search(problem, lines[0]), lines[0]
+    assert not out.exists() and not list(tmp_path.glob(".out.*"))

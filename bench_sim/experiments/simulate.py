@@ -366,3 +366,101 @@ def check_inputs(cfg: BenchConfig) -> None:
     from bench_sim.rig.target_sources import check_target_image
 
     check_target_image(cfg.target)
+
+
+# --- the command: bench-sim simulate ------------------------------------------------------------
+
+#: ``--format`` values and the file each writes into ``--out``
+FORMATS = {"zarr": "simulation.zarr", "netcdf": "simulation.nc", "tiff": "meta.json"}
+
+
+def parse_stages_arg(text: str, rows: int) -> tuple[int, ...]:
+    """``--stages``: ``"all"`` or comma-separated stages (``"10,80"``), each once, in ``1..rows``."""
+    if text.strip() == "all":
+        return check_stages("all", rows, "--stages")
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        stages = [int(p) for p in parts]
+    except ValueError:
+        raise BenchSimError(
+            f"--stages = {text!r}: expected 'all' or comma-separated integers like '10,80'"
+        ) from None
+    return check_stages(stages, rows, "--stages")
+
+
+def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, Any]) -> list[str]:
+    """Write a simulation into ``folder`` as ``fmt`` (see :data:`FORMATS`); returns the names.
+
+    ``zarr``: ``simulation.zarr`` (Zarr v3, consolidated metadata: ``xarray.open_zarr`` opens it);
+    ``netcdf``: ``simulation.nc``; ``tiff``: one 32-bit TIFF per stage and variable,
+    ``stage_MMM_VARIABLE.tiff`` (``dn`` and ``clipped`` uint32, the others float32), ``hdr.tiff``
+    and ``hdr_source.tiff`` when fused, each with its units and the provenance as JSON in the
+    ImageDescription tag, plus ``meta.json`` (provenance, units, file list).
+    """
+    import json
+    import warnings
+
+    from bench_sim.io import write_json
+
+    if fmt == "zarr":
+        with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
+            warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
+            ds.to_zarr(folder / FORMATS["zarr"], mode="w-", zarr_format=3, consolidated=True)
+        return [FORMATS["zarr"]]
+    if fmt == "netcdf":
+        ds.to_netcdf(folder / FORMATS["netcdf"])
+        return [FORMATS["netcdf"]]
+    if fmt != "tiff":
+        raise BenchSimError(f"--format = {fmt!r}: allowed {', '.join(FORMATS)}")
+    import tifffile
+
+    files: dict[str, dict[str, Any]] = {}
+
+    def put(name: str, arr: np.ndarray, var: str, stage: int | None) -> None:
+        units, long_name = VARIABLES[var]
+        info = {"variable": var, "stage": stage, "units": units, "long_name": long_name}
+        desc = json.dumps({**meta, **info}, sort_keys=True, default=str)
+        dtype = np.uint32 if var in ("dn", "clipped", "hdr_source") else np.float32
+        tifffile.imwrite(folder / name, np.asarray(arr).astype(dtype), description=desc, metadata=None)
+        files[name] = {**info, "dtype": np.dtype(dtype).name}
+
+    for m in ds.stage.values:
+        for var in ("dn", "mean_dn", "photons", "reflectance", "clipped"):
+            if var in ds:
+                put(f"stage_{int(m):03d}_{var}.tiff", ds[var].sel(stage=m).values, var, int(m))
+    for var in ("hdr", "hdr_source"):
+        if var in ds:
+            put(f"{var}.tiff", ds[var].values, var, None)
+    write_json(folder / "meta.json", {**meta, "files": files, "dims": ["line", "column"]})
+    return [*files, "meta.json"]
+
+
+def run_simulate(
+    config: Path | None, *, stages: str, seed: int, out: Path, fmt: str = "zarr", progress: bool = True
+) -> Path:
+    """``bench-sim simulate``: check every input, simulate, write the output set into ``out``.
+
+    Bad stages, formats, image files or output folders are reported (one line, exit 2) before
+    any rendering; nothing is written unless the whole set is complete.
+    """
+    from bench_sim.config import load_config
+    from bench_sim.experiments.provenance import provenance
+    from bench_sim.io import check_output_dir, output_set
+
+    if fmt not in FORMATS:
+        raise BenchSimError(f"--format = {fmt!r}: allowed {', '.join(FORMATS)}")
+    if seed < 0:
+        raise BenchSimError(f"--seed = {seed}: must be an integer >= 0")
+    cfg = load_config(config)
+    st = parse_stages_arg(stages, cfg.sensor.rows)
+    check_inputs(cfg)
+    check_output_dir(out)
+    ds = simulate(cfg, stages=st, seed=seed, progress=progress)
+    meta = provenance(
+        cfg, seed, kind="simulation", stages=list(st), engine=ds.attrs["engine"], variant=ds.attrs["variant"]
+    )
+    record = {"command": "simulate", "version": meta["version"], "seed": int(seed),
+              "config_sha256": meta["config_sha256"], "format": fmt, "stages": list(st)}
+    with output_set(out, record) as tmp:
+        write_simulation(ds, tmp, fmt, meta)
+    return Path(out)

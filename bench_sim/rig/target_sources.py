@@ -110,7 +110,7 @@ def _read_raw(path: Path) -> tuple[np.ndarray, list[str] | None]:
         return tifffile.imread(path), None
     import imageio.v3 as iio
 
-    return iio.imread(path), None
+    return iio.imread(path, plugin="pillow"), None
 
 
 @functools.lru_cache(maxsize=8)
