@@ -11,4 +11,12 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
     __version__ = "0.0.0+source"
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "simulate"]
+
+
+def __getattr__(name: str):  # lazy: importing bench_sim stays cheap
+    if name == "simulate":
+        from bench_sim.experiments.simulate import simulate
+
+        return simulate
+    raise AttributeError(f"module 'bench_sim' has no attribute {name!r}")

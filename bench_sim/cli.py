@@ -172,6 +172,22 @@ def reproduce(
     run_reproduce(cfg, seed=seed, out=out, quick=quick)
 
 
+@app.command()
+@_user_errors
+def simulate(
+    config: ConfigArg = DEFAULT_CONFIG_PATH,
+    stages: Annotated[str, typer.Option("--stages", help="'all' or stages like 10,80")] = "10,80",
+    seed: SeedOpt = 0,
+    out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/simulate"),
+    fmt: Annotated[str, typer.Option("--format", help="zarr | netcdf | tiff")] = "zarr",
+) -> None:
+    """Any bench to its DTDI stage images with exact ground truth (dn, mean_dn, photons,
+    reflectance, clipped, hdr): DIR/simulation.zarr, simulation.nc, or TIFFs + meta.json."""
+    from bench_sim.experiments.simulate import run_simulate
+
+    run_simulate(config, stages=stages, seed=seed, out=out, fmt=fmt)
+
+
 def main() -> None:  # pragma: no cover
     app()
 

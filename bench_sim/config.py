@@ -44,6 +44,7 @@ __all__ = [
     "with_overrides",
     "config_to_toml_dict",
     "config_sha256",
+    "config_to_toml_text",
 ]
 
 #: The scenes shipped inside the package (``scenes/`` in a source checkout links here).
@@ -154,7 +155,11 @@ class TargetConfig(_Section):
     it repeats around the drum circumference (rounded so an integer number of panels fits).
     """
 
-    layout: Literal["paper", "uniform"] = "paper"
+    layout: Literal["paper", "uniform", "image", "dead_leaves", "slanted_edges", "random_bars"] = Field(
+        "paper",
+        description="'paper', 'uniform', 'image' (target.image), or generated from the run's seed: "
+        "'dead_leaves', 'slanted_edges', 'random_bars' (see bench_sim.rig.target_sources)",
+    )
     panel_lines: Annotated[int, Field(ge=16, le=65536)] = 1024
     panel_columns: Annotated[int, Field(ge=16, le=65536)] = 1024
     texels_per_pixel: Annotated[int, Field(ge=1, le=16)] = 4
@@ -169,6 +174,37 @@ class TargetConfig(_Section):
         "(glints; reference engine only)",
     )
     gloss_roughness: Annotated[float, Field(gt=0, le=1)] = 0.1
+    # layout = "image" and the generated layouts (bench_sim.rig.target_sources)
+    image: str | None = Field(
+        None,
+        description="layout 'image': reflectance map file (8/16-bit PNG/TIFF, float TIFF, EXR, NPY), "
+        "relative to the config file that names it",
+    )
+    image_encoding: Literal["srgb", "linear"] | None = Field(
+        None, description="transfer function of the image values; default: srgb for integer files, "
+        "linear for float files"
+    )
+    image_channel: str = Field(
+        "luminance", description="'luminance' (Rec. 709 of linear RGB) or one channel: R, G, B, A, "
+        "or an EXR channel name"
+    )
+    image_fit: Literal["stretch", "tile", "crop"] = Field(
+        "stretch", description="stretch: whole image onto the panel; crop: cover, aspect kept, centre "
+        "kept; tile: one image pixel per object pixel, repeated"
+    )
+    dead_leaves_radius_min_px: PositiveFloat = Field(1.0, description="smallest disc radius [object px]")
+    dead_leaves_radius_max_px: PositiveFloat = Field(64.0, description="largest disc radius [object px]")
+    edge_angle_deg: Annotated[float, Field(ge=0, le=45)] = Field(
+        5.0, description="slanted_edges: mean angle of the edges to the lines / columns [deg]"
+    )
+    edge_angle_jitter_deg: Annotated[float, Field(ge=0, le=45)] = Field(
+        1.0, description="slanted_edges: each square's angle is uniform in mean +- jitter [deg]"
+    )
+    edge_cell_px: Annotated[int, Field(ge=8, le=65536)] = Field(
+        64, description="slanted_edges: cell of one slanted square [object px]"
+    )
+    bar_width_min_px: PositiveFloat = Field(2.0, description="random_bars: narrowest bar [object px]")
+    bar_width_max_px: PositiveFloat = Field(24.0, description="random_bars: widest bar [object px]")
 
     @model_validator(mode="after")
     def _range(self) -> TargetConfig:
@@ -176,6 +212,22 @@ class TargetConfig(_Section):
             raise ValueError(
                 f"reflectance_min = {self.reflectance_min} must be below reflectance_max = "
                 f"{self.reflectance_max}"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _sources(self) -> TargetConfig:
+        if self.layout == "image" and not self.image:
+            raise ValueError("layout = 'image' needs target.image (a reflectance map file)")
+        if self.dead_leaves_radius_min_px >= self.dead_leaves_radius_max_px:
+            raise ValueError(
+                f"dead_leaves_radius_min_px = {self.dead_leaves_radius_min_px} must be below "
+                f"dead_leaves_radius_max_px = {self.dead_leaves_radius_max_px}"
+            )
+        if self.bar_width_min_px > self.bar_width_max_px:
+            raise ValueError(
+                f"bar_width_min_px = {self.bar_width_min_px} must not exceed bar_width_max_px = "
+                f"{self.bar_width_max_px}"
             )
         return self
 
@@ -462,6 +514,9 @@ def _read_toml(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config error: {path}: not valid TOML ({exc})") from exc
+    image = data.get("target", {}).get("image") if isinstance(data.get("target"), dict) else None
+    if isinstance(image, str) and image and not Path(image).is_absolute():
+        data["target"]["image"] = str((path.parent / image).resolve())  # relative to this file
     base = data.pop("base", None)
     if base is None:
         return data
@@ -503,3 +558,34 @@ def config_sha256(cfg: BenchConfig) -> str:
     from bench_sim.io import sha256_text
 
     return sha256_text(json.dumps(config_to_toml_dict(cfg), sort_keys=True))
+
+
+def _toml_value(value: Any) -> str:
+    import json
+
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f"cannot write {value!r} to TOML")
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)  # a TOML basic string (JSON escapes are TOML escapes)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def config_to_toml_text(cfg: BenchConfig) -> str:
+    """The fully resolved config as TOML text (``tomllib.loads`` gives back
+    :func:`config_to_toml_dict`; tuples come back as lists)."""
+
+    def table(data: dict[str, Any], prefix: str) -> list[str]:
+        lines = [f"{k} = {_toml_value(v)}" for k, v in data.items() if not isinstance(v, dict)]
+        for k, v in data.items():
+            if isinstance(v, dict):
+                name = f"{prefix}.{k}" if prefix else k
+                lines += ["", f"[{name}]", *table(v, name)]
+        return lines
+
+    return "\n".join(table(config_to_toml_dict(cfg), "")).lstrip("\n") + "\n"

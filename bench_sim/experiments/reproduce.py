@@ -16,7 +16,6 @@ import csv
 import io
 import math
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -64,21 +63,6 @@ class _Timer:
         self.steps[name] = self.steps.get(name, 0.0) + seconds
 
 
-def _timed_frames(
-    frames: Iterator[np.ndarray], timer: _Timer, progress: Any, task: Any
-) -> Iterator[np.ndarray]:
-    """Pass frames through, charging the time spent producing them to ``render_frames``."""
-    while True:
-        t0 = time.perf_counter()
-        try:
-            chunk = next(frames)
-        except StopIteration:
-            return
-        timer.add("render_frames", time.perf_counter() - t0)
-        progress.update(task, advance=chunk.shape[0])
-        yield chunk
-
-
 def _patch_slices(panel: Any, geom: Any, cfg: BenchConfig, lines: int) -> dict[str, tuple[slice, slice]]:
     """Patch name -> (line slice, column slice) in the output images."""
     scale = geom.object_pixel_m / geom.delta_m  # panel pixels -> lines (1 in sync)
@@ -115,13 +99,12 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from bench_sim.experiments.chain_dr import measure_chain_dynamic_range
+    from bench_sim.experiments.simulate import run_pass
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
     from bench_sim.fusion.tonemap import quantize_display, tone_map
     from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
     from bench_sim.metrics.histogram import evaluate_eq18
-    from bench_sim.render.exposures import iter_photon_frames, prepare
     from bench_sim.sensor.model import stage_offset_dn
-    from bench_sim.sensor.pipeline import sensor_dtdi_pass
 
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -139,10 +122,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     rng = np.random.default_rng(seed)
 
     # 1-2. render every frame of the pass and stream it through the sensor and DTDI
-    t0 = time.perf_counter()
-    setup = prepare(cfg, frames, rng)
-    timer.add("render_setup", time.perf_counter() - t0)
-    t_int = setup.geom.t_int_s
+    # (one simulate pass; the generator goes on to the DR measurement below)
     with Progress(
         TextColumn("[bold]render + sensor + DTDI"),
         BarColumn(),
@@ -152,11 +132,12 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         transient=False,
     ) as progress:
         task = progress.add_task("pass", total=frames)
-        t0 = time.perf_counter()
-        frames_iter = _timed_frames(iter_photon_frames(setup, chunk=64), timer, progress, task)
-        stage_images = sensor_dtdi_pass(frames_iter, cfg.sensor, cfg.dtdi, t_int, stages, rng, lines=lines)
-        pass_s = time.perf_counter() - t0
-    timer.add("sensor_dtdi", max(pass_s - timer.steps.get("render_frames", 0.0), 0.0))
+        sim = run_pass(
+            cfg, stages, rng, truth=False, on_frames=lambda n: progress.update(task, advance=n)
+        )
+    for step in ("render_setup", "render_frames", "sensor_dtdi"):
+        timer.add(step, sim.timings_s[step])
+    setup, stage_images = sim.setup, sim.stage_dn
     g1, g2 = stage_images[mu1], stage_images[mu2]
     # the stage words carry the pedestal (dtdi.pedestal_dn, + m*black unless subtracted): every
     # consumer subtracts it; s1, s2 are the stage signals [DN]

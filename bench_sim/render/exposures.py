@@ -71,7 +71,7 @@ def prepare(
         check_fast_engine_valid(cfg)
     mi, choice = init_mitsuba(cfg.render.variant, "spectral" if cfg.render.spectral else "mono")
     geom = rig_geometry(cfg)
-    grid = run_texture(cfg, geom, first_frame, frames)
+    grid = run_texture(cfg, geom, first_frame, frames, rng)
     seed = int(rng.integers(0, 2**31 - 1))
     cls = FastEngine if name == "fast" else ReferenceEngine
     eng = cls(mi, cfg, geom, grid, seed, first_frame)

@@ -48,8 +48,11 @@ class RunTexture:
         return self.values.shape  # type: ignore[return-value]
 
 
-def run_texture(cfg: BenchConfig, geom: RigGeometry, first_frame: int, frames: int) -> RunTexture:
-    """Rasterise the target for frames ``first_frame .. first_frame + frames - 1``."""
+def run_texture(
+    cfg: BenchConfig, geom: RigGeometry, first_frame: int, frames: int, rng: np.random.Generator | None = None
+) -> RunTexture:
+    """Rasterise the target for frames ``first_frame .. first_frame + frames - 1`` (``rng``: the
+    run's generator, for generated targets)."""
     p = geom.object_pixel_m
     q = cfg.target.texels_per_pixel
     h_y = geom.delta_m / q
@@ -66,7 +69,7 @@ def run_texture(cfg: BenchConfig, geom: RigGeometry, first_frame: int, frames: i
     nx = int(np.ceil(2 * half_w / h_x)) + 1
     x_start = -0.5 * (nx - 1) * h_x
     circumference_px = 2 * np.pi * geom.radius_m / p
-    panel = make_panel(cfg.target, circumference_px)
+    panel = make_panel(cfg.target, circumference_px, rng)
     # panel coordinates: u = y / p (lines), v = x / p + columns / 2
     vals = rasterize(
         panel,

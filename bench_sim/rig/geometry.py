@@ -22,7 +22,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 
-__all__ = ["RigGeometry", "rig_geometry", "row_surface_angles"]
+__all__ = ["RigGeometry", "rig_geometry", "row_surface_angles", "surface_angles"]
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,15 @@ def row_surface_angles(
     and meets the circle ``y^2 + z^2 = R^2`` (nearest root).
     """
     offset = (np.arange(rows) + 0.5 - rows / 2.0) * pixel_pitch_m
+    return surface_angles(offset, image_distance_m, radius_m, camera_distance_m)
+
+
+def surface_angles(
+    offset_m: np.ndarray, image_distance_m: float, radius_m: float, camera_distance_m: float
+) -> np.ndarray:
+    """Drum angle ``theta`` [rad] hit by the chief ray through a point ``offset_m`` below the image
+    centre (any array; :func:`row_surface_angles` evaluates it at the row centres)."""
+    offset = np.asarray(offset_m, dtype=np.float64)
     alpha = np.arctan2(offset, image_distance_m)
     dy, dz = -np.sin(alpha), -np.cos(alpha)
     # |(0, D) + s (dy, dz)|^2 = R^2  ->  s^2 + 2 s D dz + D^2 - R^2 = 0

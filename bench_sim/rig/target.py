@@ -58,6 +58,8 @@ class TargetPanel:
     patches: tuple[Patch, ...] = field(default=())
     text_bitmap: np.ndarray | None = None  # (rows, cols) coverage 0..1, 8 samples per pixel
     text_box: tuple[float, float, float, float] | None = None  # u0, u1, v0, v1
+    #: map layouts (:mod:`bench_sim.rig.target_sources`): (panel_lines q, panel_columns q) texels
+    texture_map: np.ndarray | None = None
 
     @property
     def width_px(self) -> int:
@@ -70,7 +72,10 @@ class TargetPanel:
         v = np.asarray(v_px, dtype=np.float64)
         u, v = np.broadcast_arrays(u, v)
         out = np.full(u.shape, self._base(), dtype=np.float64)
-        if self.cfg.layout == "paper":
+        if self.texture_map is not None:
+            inside = (u < self.cfg.panel_lines) & (v >= 0) & (v < self.cfg.panel_columns)
+            out[inside] = self._map_at(u[inside], v[inside])
+        elif self.cfg.layout == "paper":
             for v_origin in (0.0, self.cfg.panel_columns / 2.0):
                 for box, paint in self._elements():
                     m = _inside(u, v - v_origin, box)
@@ -85,6 +90,13 @@ class TargetPanel:
         u = np.mod(np.asarray(u_px, dtype=np.float64), self.period_px)
         v = np.asarray(v_px, dtype=np.float64)
         out = np.full((u.size, v.size), self._base(), dtype=np.float64)
+        if self.texture_map is not None:
+            iu = np.nonzero(u < self.cfg.panel_lines)[0]
+            iv = np.nonzero((v >= 0) & (v < self.cfg.panel_columns))[0]
+            if iu.size and iv.size:
+                uu, vv = np.meshgrid(u[iu], v[iv], indexing="ij")
+                out[np.ix_(iu, iv)] = self._map_at(uu, vv)
+            return out
         if self.cfg.layout != "paper":
             return out
         for v_origin in (0.0, self.cfg.panel_columns / 2.0):
@@ -105,6 +117,14 @@ class TargetPanel:
         u0, u1, v0, v1 = _layout(self.cfg)[name]
         off = 0.0 if half == "left" else self.cfg.panel_columns / 2.0
         return u0, u1, v0 + off, v1 + off
+
+    def _map_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The texture map's texel containing each panel point (piecewise constant)."""
+        tm = self.texture_map
+        assert tm is not None
+        iu = np.clip((u * (tm.shape[0] / self.cfg.panel_lines)).astype(np.int64), 0, tm.shape[0] - 1)
+        iv = np.clip((v * (tm.shape[1] / self.cfg.panel_columns)).astype(np.int64), 0, tm.shape[1] - 1)
+        return tm[iu, iv]
 
     def _base(self) -> float:
         return self.cfg.uniform_reflectance if self.cfg.layout == "uniform" else self.cfg.background
@@ -207,14 +227,23 @@ def _text_bitmap(c: TargetConfig) -> tuple[np.ndarray, tuple[float, float, float
     return np.asarray(img, dtype=np.float32) / 255.0, box
 
 
-def make_panel(cfg: TargetConfig, circumference_px: float) -> TargetPanel:
+def make_panel(
+    cfg: TargetConfig, circumference_px: float, rng: np.random.Generator | None = None
+) -> TargetPanel:
     """Build the target panel for a drum of the given circumference (object pixels).
 
     The repeat period is the circumference divided by the largest whole number of panels of
-    ``panel_lines`` that fits (at least one).
+    ``panel_lines`` that fits (at least one). The map layouts (``image`` and the generated ones,
+    :mod:`bench_sim.rig.target_sources`) read their file or draw from a child of ``rng`` (the
+    run's generator; its own stream is left as it is).
     """
     n_rep = max(int(circumference_px // cfg.panel_lines), 1)
     period = circumference_px / n_rep
+    from bench_sim.rig.target_sources import MAP_LAYOUTS, panel_map
+
+    if cfg.layout in MAP_LAYOUTS:
+        child = rng.spawn(1)[0] if rng is not None else None
+        return TargetPanel(cfg, period, (), texture_map=panel_map(cfg, child))
     patches: list[Patch] = []
     if cfg.layout == "paper":
         lay = _layout(cfg)

@@ -157,6 +157,8 @@ def expose(
     fixed: FixedPattern,
     t_int_s: float,
     rng: np.random.Generator,
+    *,
+    saturated: np.ndarray | None = None,
 ) -> np.ndarray:
     """Expose the sensor: mean photons per pixel per frame -> raw pixel values [DN].
 
@@ -178,6 +180,10 @@ def expose(
         Integration time of one frame [s] (dark current accumulates over it).
     rng
         Random generator for the temporal noise of this call.
+    saturated
+        Optional boolean array of ``photons``' shape, filled with ``True`` where the pixel hit
+        its full well or the ADC's top value ``2**adc_bits - 1`` (where the linear model's mean
+        no longer holds).
 
     Returns
     -------
@@ -209,6 +215,8 @@ def expose(
         electrons += light_e
     else:
         electrons = light_e + dark_e
+    if saturated is not None:
+        np.greater_equal(electrons, sensor.full_well_e, out=saturated)
     np.minimum(electrons, sensor.full_well_e, out=electrons)
     if sensor.read_noise and sensor.read_noise_e > 0:
         electrons += sensor.read_noise_e * rng.standard_normal(p.shape, dtype=np.float32)
@@ -217,6 +225,8 @@ def expose(
     dn *= sensor.conversion_gain_dn_per_e
     dn += sensor.black_offset_dn + fixed.column_offset_dn
     top = float(pixel_saturation_dn(sensor))
+    if saturated is not None:
+        saturated |= dn >= top - (0.5 if sensor.quantization else 0.0)
     if sensor.quantization:
         np.rint(dn, out=dn)
         np.clip(dn, 0.0, top, out=dn)

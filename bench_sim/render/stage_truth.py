@@ -1,0 +1,282 @@
+"""Exact ground truth of DTDI stage images, computed in the same pass as the images.
+
+A stage-``m`` pixel (scene line ``j``, column ``n``) sums the reads of sensor rows
+``i = 0 .. m-1`` in frames ``j + i`` (paper eq. 1-2). Its truth is therefore a sum over the same
+``m`` (frame, row) pairs:
+
+``photons``
+    ``sum_i mu_p[j + i, i, n]``: the mean photons the ``m`` pixels collected (the renderer's
+    exposures, smear included), accumulated by :class:`StageSums`.
+``mean_dn``
+    The exact expectation of the stage word before it is clipped, for this physical sensor
+    (:func:`stage_mean_dn`): the EMVA 1288 linear model of every read with the pixel's own fixed
+    pattern, summed over the ``m`` reads.
+``reflectance``
+    The target reflectance the pixel integrated: the mean over its ``m`` rows of the target
+    averaged over each row's footprint on the drum in its frame -- the pixel's area projected
+    through the lens centre onto the drum, swept by the surface's travel during the integration
+    time (smear). Footprints are computed from the rig geometry (:func:`row_footprints`), so
+    they follow every row's own position: under a sync error ``e`` the ``m`` footprints of one
+    stage pixel walk ``e`` object pixels apart per row, and the truth moves and widens with them.
+    Optical blur (defocus, diffraction) is not part of the footprint.
+
+Memory: :class:`StageSums` keeps a ring of ``max(stages)`` partial line sums (as the DTDI
+accumulator does) and :func:`stage_reflectance` works on a band of output lines at a time, so
+only the requested stage images grow with the number of lines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from bench_sim.config import BenchConfig, SensorConfig
+from bench_sim.errors import BenchSimError
+from bench_sim.render.texture import RunTexture
+from bench_sim.rig.geometry import RigGeometry, surface_angles
+from bench_sim.sensor.emva import FixedPattern
+
+__all__ = [
+    "RowFootprints",
+    "row_footprints",
+    "stage_reflectance",
+    "StageSums",
+    "stage_dark_offset_dn",
+    "stage_mean_dn",
+]
+
+#: Quadrature points per pixel side (along the track: also per integration time)
+_SAMPLES_Y = 32
+_SAMPLES_T = 32
+_SAMPLES_X = 16
+#: Rows whose across-track footprints differ by less than this [texels] at the outermost column
+#: share one across-track matrix.
+_X_GROUP_TOL_TEXELS = 0.01
+
+
+@dataclass(frozen=True)
+class RowFootprints:
+    """Footprints of the pixels of each sensor row on the run's texture grid (frame 0).
+
+    Attributes
+    ----------
+    y_base
+        (R,) first texel row of each row's along-track weights in frame 0; frame ``k`` adds
+        ``k * q`` (the grid moves exactly ``q`` texels per line period).
+    y_weights
+        Per row, the weights of consecutive texel rows from ``y_base`` (sum 1): the pixel's
+        height projected on the drum convolved with the smear, on the bilinear interpolant.
+    x_group
+        (R,) index of each row's across-track matrix in ``x_matrices``.
+    x_matrices
+        (N, nx) sparse matrices, rows sum to 1: column ``n``'s footprint across the track.
+    """
+
+    y_base: np.ndarray
+    y_weights: tuple[np.ndarray, ...]
+    x_group: np.ndarray
+    x_matrices: tuple[sp.csr_matrix, ...]
+
+
+def _hat_weights(pos: np.ndarray, n_nodes: int, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Node indices and weights of the linear interpolant at fractional node positions ``pos``."""
+    i0 = np.floor(pos).astype(np.int64)
+    if i0.min() < 0 or i0.max() + 1 >= n_nodes:
+        raise BenchSimError(f"stage truth: pixel footprints fall outside the run texture ({what})")
+    w1 = pos - i0
+    return i0, 1.0 - w1, w1
+
+
+def row_footprints(cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, rows: int) -> RowFootprints:
+    """Footprints of sensor rows ``0 .. rows-1`` (see :class:`RowFootprints`).
+
+    Along the track, row ``i`` at sensor offset ``o = (i + f - M/2) * pitch`` (``f`` in 0..1
+    over the pixel height) sees drum angle ``theta(o)`` (the chief ray through the lens
+    centre, :func:`bench_sim.rig.geometry.surface_angles`); at time ``t`` in ``[0, t_int]`` of
+    frame 0 that is material ``y = R (omega t - theta) + y_offset``. Across the track, column
+    ``n`` at offset ``x_s = (n + g - N/2) * pitch`` sees ``x = x_s (D - R cos theta_i) / s'``
+    (``D`` lens to axis, ``s'`` image distance). Both are integrated by midpoint quadrature
+    (32 x 32 points along, 16 across) on the texture's bilinear interpolant.
+    """
+    s = cfg.sensor
+    M, N, pitch = s.rows, s.columns, s.pixel_pitch_m
+    ny, nx = grid.shape
+    R, D, s_img = geom.radius_m, geom.camera_distance_m, geom.image_distance_m
+    f = (np.arange(_SAMPLES_Y) + 0.5) / _SAMPLES_Y
+    t = (np.arange(_SAMPLES_T) + 0.5) / _SAMPLES_T * geom.t_int_s
+    g = (np.arange(_SAMPLES_X) + 0.5) / _SAMPLES_X
+    y_base = np.zeros(rows, dtype=np.int64)
+    y_weights = []
+    scales = np.zeros(rows)
+    for i in range(rows):
+        theta = surface_angles((i + f - M / 2.0) * pitch, s_img, R, D)
+        y = geom.y_material(theta[:, None], t[None, :]).ravel()
+        i0, w0, w1 = _hat_weights((y - grid.y_start_m) / grid.h_y_m, ny, "along the track")
+        base = int(i0.min())
+        w = np.bincount(i0 - base, w0, minlength=int(i0.max()) - base + 2)
+        w += np.bincount(i0 + 1 - base, w1, minlength=w.size)
+        y_base[i] = base
+        y_weights.append(w / w.sum())
+        theta_c = surface_angles(np.array([(i + 0.5 - M / 2.0) * pitch]), s_img, R, D)[0]
+        scales[i] = (D - R * np.cos(theta_c)) / s_img
+    # rows whose across-track footprints agree to _X_GROUP_TOL_TEXELS share a matrix
+    edge_texels = scales * (0.5 * N * pitch) / grid.h_x_m
+    keys = np.round((edge_texels - edge_texels[0]) / _X_GROUP_TOL_TEXELS).astype(np.int64)
+    x_group = np.zeros(rows, dtype=np.int64)
+    mats: list[sp.csr_matrix] = []
+    seen: dict[int, int] = {}
+    xs = (np.arange(N)[:, None] + g[None, :] - N / 2.0) * pitch  # (N, S) sensor offsets
+    cols = np.repeat(np.arange(N), _SAMPLES_X)
+    for i in range(rows):
+        k = int(keys[i])
+        if k not in seen:
+            members = keys == k
+            scale = float(scales[members].mean())
+            pos = ((xs * scale).ravel() - grid.x_start_m) / grid.h_x_m
+            i0, w0, w1 = _hat_weights(pos, nx, "across the track")
+            data = np.concatenate([w0, w1]) / _SAMPLES_X
+            mat = sp.coo_matrix(
+                (data, (np.concatenate([cols, cols]), np.concatenate([i0, i0 + 1]))), shape=(N, nx)
+            ).tocsr()
+            seen[k] = len(mats)
+            mats.append(mat)
+        x_group[i] = seen[k]
+    return RowFootprints(y_base, tuple(y_weights), x_group, tuple(mats))
+
+
+def stage_reflectance(
+    values: np.ndarray, q: int, fp: RowFootprints, stage: int, line0: int, line1: int
+) -> np.ndarray:
+    """Reflectance integrated by stage-``m`` pixels of scene lines ``line0 .. line1 - 1``.
+
+    ``rho_m[j, n] = (1/m) sum_{i < m} <footprint of row i in frame j + i, texture>``: row ``i``
+    reads line ``j`` in frame ``j + i`` (eq. 1-2), when its footprint sits ``(j + i) q`` texel
+    rows further along the grid than in frame 0.
+
+    Parameters
+    ----------
+    values
+        (ny, nx) reflectance of the run's texture grid (:attr:`RunTexture.values`).
+    q
+        Texels per line period along the track.
+    fp
+        :func:`row_footprints` of at least ``stage`` rows.
+    stage, line0, line1
+        ``m`` and the band of output lines.
+
+    Returns
+    -------
+    numpy.ndarray
+        (line1 - line0, N) reflectance 0..1, float64.
+    """
+    m = int(stage)
+    if m > len(fp.y_weights):
+        raise BenchSimError(f"stage {m}: footprints known for {len(fp.y_weights)} rows only")
+    nl = int(line1) - int(line0)
+    n_cols = fp.x_matrices[0].shape[0]
+    out = np.zeros((nl, n_cols), dtype=np.float64)
+    if nl <= 0:
+        return out
+    ny = values.shape[0]
+    for group in np.unique(fp.x_group[:m]):
+        rows = [i for i in range(m) if fp.x_group[i] == group]
+        offs = [int(fp.y_base[i]) + i * q for i in rows]
+        lo = min(offs)
+        kern = np.zeros(max(o + fp.y_weights[i].size for o, i in zip(offs, rows, strict=True)) - lo)
+        for o, i in zip(offs, rows, strict=True):
+            kern[o - lo : o - lo + fp.y_weights[i].size] += fp.y_weights[i]
+        start0 = int(line0) * q + lo
+        if start0 < 0 or start0 + (nl - 1) * q + kern.size > ny:
+            raise BenchSimError("stage truth: requested lines fall outside the run texture")
+        band = np.zeros((nl, values.shape[1]), dtype=np.float64)
+        for c in np.nonzero(kern)[0]:
+            a = start0 + int(c)
+            band += kern[c] * values[a : a + (nl - 1) * q + 1 : q]
+        out += (fp.x_matrices[group] @ band.T).T
+    return out / m
+
+
+class StageSums:
+    """Float DTDI sums of per-pixel quantities: for every stage ``m`` and scene line ``j``,
+    ``sum_{i < m} v[frame j + i, row i]`` (paper eq. 1-2 without the output word).
+
+    A ring of ``max(stages)`` partial sums, as :class:`bench_sim.sensor.dtdi.DTDIAccumulator`
+    keeps, so memory does not grow with the number of lines. Each frame holds ``Q`` quantities
+    per pixel, shape (R, Q, N) with ``R >= max(stages)`` rows.
+    """
+
+    def __init__(self, n_columns: int, stages: Sequence[int], n_quantities: int) -> None:
+        self.stages = tuple(sorted(int(m) for m in stages))
+        self.ring_rows = self.stages[-1]
+        self._ring = np.zeros((self.ring_rows, int(n_quantities), int(n_columns)), dtype=np.float64)
+        self.frames_seen = 0
+
+    def push(self, frame: np.ndarray) -> dict[int, np.ndarray]:
+        """Add one (R, Q, N) frame; return stage -> its completed line's (Q, N) sums."""
+        r_rows = self.ring_rows
+        k = self.frames_seen
+        r = k % r_rows
+        self._ring[r::-1] += frame[: r + 1]
+        if r + 1 < r_rows:
+            self._ring[r_rows - 1 : r : -1] += frame[r + 1 : r_rows]
+        out = {}
+        for m in self.stages:
+            j = k - m + 1
+            if j >= 0:
+                out[m] = self._ring[j % r_rows].copy()
+        self._ring[(k - r_rows + 1) % r_rows] = 0.0
+        self.frames_seen = k + 1
+        return out
+
+
+def stage_dark_offset_dn(
+    sensor: SensorConfig,
+    fixed: FixedPattern,
+    t_int_s: float,
+    stage: int,
+    *,
+    subtract_black: bool,
+    pedestal_dn: float,
+) -> np.ndarray:
+    """The light-independent part [DN] of the expected stage-``m`` word of each column.
+
+    ``sum_{i < m} (K I_d[i, n] t_int + b + c[n]) - m b [subtract_black] + P``: the dark signal of
+    the ``m`` pixels (their own dark currents ``I_d``), the black offset ``b`` (left in when not
+    subtracted), the column amplifier offset ``c[n]`` (coherent over the ``m`` rows) and the
+    pedestal ``P``. Shape (N,).
+    """
+    m = int(stage)
+    k = sensor.conversion_gain_dn_per_e
+    dark = k * t_int_s * fixed.dark_current_e_s[:m].sum(axis=0)
+    black = 0.0 if subtract_black else m * sensor.black_offset_dn
+    return dark + m * fixed.column_offset_dn + black + float(pedestal_dn)
+
+
+def stage_mean_dn(
+    gain_weighted_photons: np.ndarray, sensor: SensorConfig, dark_offset_dn: np.ndarray
+) -> np.ndarray:
+    """Exact expectation [DN] of stage words before the word clips (linear range of every read).
+
+    Each read is ``y = K (eta g mu_p + I_d t_int) + b + c`` in the mean (EMVA 1288 R4 eq. 5 with
+    the pixel's PRNU gain ``g``, dark current ``I_d`` and column offset ``c``); the stage sums
+    ``m`` reads (eq. 1-2), so
+    ``E[gamma_m] = K eta sum_i g_i mu_p,i + stage_dark_offset_dn``.
+
+    Parameters
+    ----------
+    gain_weighted_photons
+        ``sum_i g_i mu_p,i`` over the stage's reads (photons), shape (..., N).
+    sensor
+        Pixel model.
+    dark_offset_dn
+        (N,) :func:`stage_dark_offset_dn` of the stage.
+
+    References
+    ----------
+    EMVA Standard 1288, Release 4.0 Linear (2021), eq. 5; the DTDI sum of paper eq. 1-2.
+    """
+    k_eta = sensor.conversion_gain_dn_per_e * sensor.quantum_efficiency
+    return k_eta * np.asarray(gain_weighted_photons, dtype=np.float64) + dark_offset_dn
