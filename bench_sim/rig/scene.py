@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,7 @@ import numpy as np
 from bench_sim.config import BenchConfig
 from bench_sim.rig.geometry import RigGeometry
 
-__all__ = ["scene_dict", "spot_intensity_w_sr", "fill_radiance_w_m2_sr"]
+__all__ = ["scene_dict", "light_names", "spot_intensity_w_sr", "fill_radiance_w_m2_sr"]
 
 
 def spot_intensity_w_sr(cfg: BenchConfig) -> float:
@@ -33,6 +34,21 @@ def spot_intensity_w_sr(cfg: BenchConfig) -> float:
 def fill_radiance_w_m2_sr(cfg: BenchConfig) -> float:
     """Radiance of the weak fill (constant environment): ``E / pi``."""
     return cfg.lights.weak.irradiance_w_m2 / math.pi
+
+
+def light_names(cfg: BenchConfig) -> tuple[str, ...]:
+    """Names of the lights that emit in this bench (enabled, non-zero power), in a fixed order.
+
+    The scene is linear in each of them: the radiance of any frame is the sum over these lights
+    of what the scene shows under that light alone (``scene_dict(..., lights=[name])``), each
+    scaled by its relative intensity in that frame (:func:`bench_sim.rig.lights.frame_weights`).
+    """
+    names = []
+    if cfg.lights.strong.enabled and cfg.lights.strong.irradiance_w_m2 > 0:
+        names.append("strong")
+    if cfg.lights.weak.enabled and cfg.lights.weak.irradiance_w_m2 > 0:
+        names.append("weak")
+    return tuple(names)
 
 
 def _look_at(mi: Any, origin, target, up=(0.0, 1.0, 0.0)) -> Any:
@@ -88,6 +104,7 @@ def scene_dict(
     spp: int,
     aov_position: bool = False,
     spectral: bool = False,
+    lights: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """Mitsuba scene description of the rig.
 
@@ -106,6 +123,9 @@ def scene_dict(
         photon-weighted radiance (``specfilm``, see :mod:`bench_sim.rig.spectra`); with
         ``aov_position`` an ``hdrfilm`` is used instead (Mitsuba's ``aov`` integrator corrupts
         memory with ``specfilm``), whose first channels are not radiance.
+    lights
+        Names (from :func:`light_names`) of the lights to put in the scene; ``None``: all of
+        them. A scene with a subset shows what the bench looks like under those lights alone.
     """
     from bench_sim.rig import spectra
     lens, R, L = cfg.lens, cfg.drum.radius_m, cfg.drum.length_m
@@ -158,8 +178,14 @@ def scene_dict(
         }
     else:
         scene.update(_mesh_shapes(mi, cfg, drum_bsdf))
+    active = light_names(cfg)
+    if lights is not None:
+        unknown = [n for n in lights if n not in active]
+        if unknown:
+            raise ValueError(f"lights {unknown}: not among this bench's emitting lights {list(active)}")
+        active = tuple(n for n in active if n in lights)
     strong = cfg.lights.strong
-    if strong.enabled and strong.irradiance_w_m2 > 0:
+    if "strong" in active:
         scene["strong"] = {
             "type": "spot",
             "to_world": _look_at(mi, strong.position_m, strong.aim_m),
@@ -170,7 +196,7 @@ def scene_dict(
             "beam_width": strong.beam_width_deg,
         }
     weak = cfg.lights.weak
-    if weak.enabled and weak.irradiance_w_m2 > 0:
+    if "weak" in active:
         scene["weak"] = {
             "type": "constant",
             "radiance": spectra.light_spectrum(cfg, weak, fill_radiance_w_m2_sr(cfg))
