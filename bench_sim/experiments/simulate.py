@@ -169,6 +169,7 @@ def run_pass(
     from bench_sim.render.exposures import iter_photon_frames, prepare
     from bench_sim.render.stage_truth import (
         StageSums,
+        reflectance_rows,
         row_footprints,
         stage_dark_offset_dn,
         stage_mean_dn,
@@ -221,10 +222,11 @@ def run_pass(
         start = refl_done
         while start < upto:
             stop = min(start + TRUTH_BAND_LINES, upto)
+            q = setup.grid.q
+            r0, r1 = reflectance_rows(footprints, q, st[-1], start, stop)
+            band = setup.grid.rows(r0, r1)
             for s, m in enumerate(st):
-                reflectance[s, start:stop] = stage_reflectance(
-                    setup.grid.values, setup.grid.q, footprints, m, start, stop
-                )
+                reflectance[s, start:stop] = stage_reflectance(band, q, footprints, m, start, stop, row0=r0)
             start = stop
         return start
 
