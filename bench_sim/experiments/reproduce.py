@@ -135,14 +135,14 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         sim = run_pass(
             cfg, stages, rng, truth=False, on_frames=lambda n: progress.update(task, advance=n)
         )
-    for step in ("render_setup", "render_frames", "sensor_dtdi"):
+    for step in ("render_setup", "render_frames", "sensor_dtdi", "pass_wall"):
         timer.add(step, sim.timings_s[step])
     setup, stage_images = sim.setup, sim.stage_dn
     g1, g2 = stage_images[mu1], stage_images[mu2]
     # the stage words carry the pedestal (dtdi.pedestal_dn, + m*black unless subtracted): every
     # consumer subtracts it; s1, s2 are the stage signals [DN]
     off1, off2 = (stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2))
-    s1, s2 = g1 - off1, g2 - off2
+    s1, s2 = g1 - np.float32(off1), g2 - np.float32(off2)  # float32: exact for the words
 
     # 3. fusion and display transform
     t0 = time.perf_counter()
