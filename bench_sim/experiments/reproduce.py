@@ -272,17 +272,21 @@ def _write_outputs(
 ) -> None:
     from bench_sim.experiments.figures import fig3_stages, fig4_hdr, stage_display
     from bench_sim.io import atomic_path, write_exr, write_png, write_tiff16
+    from bench_sim.parallel import start
 
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
     g1, g2 = stage_images[mu1], stage_images[mu2]
-    write_tiff16(out / "gamma1.tiff", g1, dict(meta, image=f"Gamma1, stage {mu1} [DN]"))
-    write_tiff16(out / "gamma2.tiff", g2, dict(meta, image=f"Gamma2, stage {mu2} [DN]"))
-    write_exr(
-        out / "gamma_hdr.exr",
-        {"Y": fused.hdr, "source": fused.source.astype(np.float32)},
-        dict(meta, image=f"Gamma_HDR (eq. 11) [DN, stage-{mu2} units]; source = stage used"),
-    )
-    write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})"))
+    # the image files are written on the thread pool while the figures are drawn here
+    files_written = start([
+        lambda: write_tiff16(out / "gamma1.tiff", g1, dict(meta, image=f"Gamma1, stage {mu1} [DN]")),
+        lambda: write_tiff16(out / "gamma2.tiff", g2, dict(meta, image=f"Gamma2, stage {mu2} [DN]")),
+        lambda: write_exr(
+            out / "gamma_hdr.exr",
+            {"Y": fused.hdr, "source": fused.source.astype(np.float32)},
+            dict(meta, image=f"Gamma_HDR (eq. 11) [DN, stage-{mu2} units]; source = stage used"),
+        ),
+        lambda: write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})")),
+    ])
     fig3_stages(stage_images, fig3, beta, out / "fig3_stages.png", meta)
     # dark detail: the lower (darkest) half of the wedge under the fill alone
     wl0, wl1, wc0, wc1 = _box(panel, cfg, "wedge", "right", lines)
@@ -290,8 +294,8 @@ def _write_outputs(
     dark_box = ((wl0 + wl1) // 2, wl1, wc0 + inset, wc1 - inset)
     bright_box = _box(panel, cfg, "vbars", "left", lines)
     fig4_hdr(
-        np.clip(fused.hdr / fused.full_scale_dn, 0, 1),
-        tra8 / 255.0,
+        np.clip(fused.hdr.astype(np.float32) / np.float32(fused.full_scale_dn), 0, 1),
+        tra8 / np.float32(255.0),
         stage_display(g1, beta),
         stage_display(g2, beta),
         dark_box,
@@ -324,3 +328,4 @@ def _write_outputs(
     w.writerow(["# version", metrics["version"]])
     with atomic_path(out / "table1.csv") as tmp:
         tmp.write_text(buf.getvalue())
+    files_written()
