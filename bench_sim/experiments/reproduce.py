@@ -119,6 +119,9 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     frames = lines + max(stages) - 1
     t_start = time.perf_counter()
     timer = _Timer()
+    from bench_sim.experiments.figures import import_in_background
+
+    import_in_background()  # ready when the figures are drawn
     rng = np.random.default_rng(seed)
 
     # 1-2. render every frame of the pass and stream it through the sensor and DTDI

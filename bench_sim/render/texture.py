@@ -117,6 +117,14 @@ class RunTexture:
                     out[lo - r0 : hi - r0] = self._block(b)[lo - b * BLOCK_ROWS : hi - b * BLOCK_ROWS]
         return out
 
+    @property
+    def held_bytes(self) -> int:
+        """Bytes of rasterised texels the texture holds now (its blocks, or the whole grid)."""
+        if "values" in self.__dict__:
+            return int(self.values.nbytes)
+        with self._blocks.lock:
+            return int(sum(b.nbytes for b in self._blocks.blocks.values()))
+
     @functools.cached_property
     def values(self) -> np.ndarray:
         """The whole grid, (ny, nx) float32 (rasterised once, then kept)."""
