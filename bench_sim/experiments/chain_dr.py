@@ -29,6 +29,15 @@ figure is the gain over the better input, ``Gamma1``: the saturation end is the 
 noise floor drops by the read-noise ratio of the two stages (about ``sqrt(mu2 / mu1)``: read noise adds up as
 ``sqrt(m)`` in the digital sum), so it is about ``10 lg(mu2 / mu1)``, not ``20 lg``.
 :attr:`ChainDR.gain_over_gamma2_by_construction` says whether the condition holds for the run.
+
+References
+----------
+.. [EMVA] EMVA Standard 1288, Release 4.0 Linear: Standard for Characterization of Image
+   Sensors and Cameras, European Machine Vision Association, 2021,
+   section 3 (saturation at the variance maximum; SNR = 1
+   threshold).
+.. [DTDI] *An HDR Imaging Method With DTDI Technology for Push-Broom Cameras* (the paper
+   bench_sim reproduces), eq. 11 (fusion) and eq. 15 (predicted gain).
 """
 
 from __future__ import annotations
