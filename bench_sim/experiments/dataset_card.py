@@ -76,7 +76,7 @@ def write_thumbnails(out: Path, spec: DatasetSpec, indices: list[int]) -> Path |
 
     from bench_sim.experiments.figures import stage_display
     from bench_sim.fusion.tonemap import tone_map
-    from bench_sim.io import write_figure_png
+    from bench_sim.io import write_png
 
     variables = ["dn", "reflectance"] + (["hdr"] if spec.fused else [])
     per_row = 4
@@ -113,7 +113,10 @@ def write_thumbnails(out: Path, spec: DatasetSpec, indices: list[int]) -> Path |
     )
     fig.tight_layout()
     meta = {"dataset": spec.name, "seed": spec.seed, "samples": indices}
-    return write_figure_png(out / THUMBNAILS, fig, meta, dpi=100)
+    fig.canvas.draw()
+    grey = np.asarray(fig.canvas.buffer_rgba())[..., 0].copy()  # a grey figure: R = G = B
+    plt.close(fig)
+    return write_png(out / THUMBNAILS, grey, meta)  # 8-bit grey: a third of the RGBA file
 
 
 def _randomized_rows(spec: DatasetSpec, df: pd.DataFrame) -> list[list[Any]]:
