@@ -10,15 +10,20 @@ per sample) with its number of samples changed. For 1 and 2 workers of a local D
    workers' peak resident memory (``ru_maxrss``) after each run: flat in the number of samples
    when a worker holds one sample at a time. The client's peak is printed too.
 
-Bytes per sample: the size of ``data.zarr`` (Zarr v3, Zstandard) over the samples, beside the
-uncompressed size of a sample's arrays. Timings are wall-clock on whatever else the machine runs.
+``--rss-samples K`` instead makes K samples one after the other in this process (what a worker
+does) and prints its resident memory every 8 samples.
 
-Usage: python benchmarks/bench_dataset.py [--samples 8] [--keep DIR]
+Bytes per sample: the size of ``data.zarr`` (Zarr v3, Zstandard) over the samples, beside the
+uncompressed size of a sample's arrays. Timings are wall-clock on whatever else the machine runs:
+the load average before each timed run is printed with it.
+
+Usage: python benchmarks/bench_dataset.py [--samples 8] [--keep DIR] [--rss-samples K]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import shutil
 import tempfile
@@ -55,11 +60,31 @@ def _run(client, spec: Path, out: Path) -> float:
     return time.perf_counter() - t0
 
 
+def _rss_series(samples: int) -> None:
+    """Resident memory of one process making ``samples`` samples of the example in a row."""
+    from bench_sim.experiments.dataset import SampleTask, make_sample
+    from bench_sim.experiments.dataset_spec import load_spec, sample_streams
+
+    with tempfile.TemporaryDirectory() as tmp:
+        spec = load_spec(_spec(Path(tmp), samples))
+        for i in range(samples):
+            cfg = spec.sample_config(spec.draw(i), i)
+            make_sample(SampleTask(i, cfg, spec.stages, sample_streams(spec.seed, i)[1]))
+            if i % 8 == 7 or i == samples - 1:
+                pages = int(Path("/proc/self/statm").read_text().split()[1])
+                mib = pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+                print(f"after {i + 1:4d} samples: resident {mib:6.0f} MiB", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--samples", type=int, default=8)
     ap.add_argument("--keep", type=Path, default=None, help="keep the datasets in this folder")
+    ap.add_argument("--rss-samples", type=int, default=0, help="only: memory of one process over K samples")
     a = ap.parse_args()
+    if a.rss_samples:
+        _rss_series(a.rss_samples)
+        return
     tmp = Path(tempfile.mkdtemp(prefix="bench_dataset_")) if a.keep is None else a.keep
     tmp.mkdir(parents=True, exist_ok=True)
     n = a.samples
@@ -69,9 +94,11 @@ def main() -> None:
         for workers in (1, 2):
             with open_client(workers=workers) as client:
                 _run(client, warm, tmp / f"warm_{workers}")
+                load = os.getloadavg()[0]
                 wall = _run(client, spec, tmp / f"data_{workers}")
                 rate[workers] = 60.0 * n / wall
-                print(f"{workers} worker(s): {n} samples in {wall:6.1f} s = {rate[workers]:5.2f} samples/min")
+                print(f"{workers} worker(s): {n} samples in {wall:6.1f} s = {rate[workers]:5.2f} samples/min "
+                      f"(load average before: {load:.1f} on {os.cpu_count()} cores)")
                 if workers == 2:
                     peak_n = _worker_peak_mib(client)
                     _run(client, spec_more, tmp / "data_more")

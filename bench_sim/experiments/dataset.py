@@ -563,7 +563,7 @@ def run_dataset(
         run.ran, run.failed = writer.ran, writer.failed
         run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
     df = _write_manifest(out, spec, meta, values)
-    write_card(out, spec, df, command=command)
+    write_card(out, spec, df, command=command, provenance=meta)
     if run.complete == spec.samples:
         write_json(out / COMPLETION_RECORD, {
             "command": "dataset", "version": meta["version"], "seed": spec.seed,

@@ -63,9 +63,12 @@ def _table(header: list[str], rows: list[list[Any]]) -> list[str]:
     return out
 
 
-def write_thumbnails(out: Path, spec: DatasetSpec, indices: list[int]) -> Path | None:
+def write_thumbnails(
+    out: Path, spec: DatasetSpec, indices: list[int], provenance: dict[str, Any] | None = None
+) -> Path | None:
     """Thumbnail sheet of the samples ``indices``: per sample the camera image and the
-    reflectance truth. Returns the path, or ``None`` when there is nothing to show."""
+    reflectance truth (``provenance`` in the PNG's ``bench_sim`` text chunk). Returns the path,
+    or ``None`` when there is nothing to show."""
     if not indices:
         (out / THUMBNAILS).unlink(missing_ok=True)
         return None
@@ -112,11 +115,19 @@ def write_thumbnails(out: Path, spec: DatasetSpec, indices: list[int]) -> Path |
         f"{spec.name}: camera image and reflectance truth of samples {indices[0]}..{indices[-1]}", fontsize=9
     )
     fig.tight_layout()
-    meta = {"dataset": spec.name, "seed": spec.seed, "samples": indices}
+    meta = {**(provenance or {}), "dataset": spec.name, "seed": spec.seed, "samples": indices}
     fig.canvas.draw()
     grey = np.asarray(fig.canvas.buffer_rgba())[..., 0].copy()  # a grey figure: R = G = B
     plt.close(fig)
     return write_png(out / THUMBNAILS, grey, meta)  # 8-bit grey: a third of the RGBA file
+
+
+def _uses(spec: DatasetSpec, key: str, row: dict[str, Any]) -> bool:
+    """Whether a sample's bench reads the randomised ``key`` (``target.image``: only with the
+    ``image`` layout; the value is drawn, and in the config, either way)."""
+    if key != "target.image":
+        return True
+    return row.get("target.layout", spec.base.target.layout) == "image"
 
 
 def _randomized_rows(spec: DatasetSpec, df: pd.DataFrame) -> list[list[Any]]:
@@ -125,23 +136,36 @@ def _randomized_rows(spec: DatasetSpec, df: pd.DataFrame) -> list[list[Any]]:
     done = df[df.status == "complete"]
     rows = []
     for key, dist in spec.randomize.items():
+        if key == "target.image":
+            done_key = done[[_uses(spec, key, r) for r in done.to_dict("records")]] if len(done) else done
+        else:
+            done_key = done
         params = {k: v for k, v in dist.model_dump().items() if k not in ("dist", "files")}
         if dist.dist == "glob":
             params["files"] = len(dist.files)
         described = f"{dist.dist}(" + ", ".join(f"{k}={_fmt(v)}" for k, v in params.items()) + ")"
-        col = done[key] if len(done) else df[key].iloc[:0]
+        col = done_key[key] if len(done_key) else df[key].iloc[:0]
         if len(col) and is_numeric_dtype(col) and not is_bool_dtype(col):
             drawn = f"{_fmt(col.min())} .. {_fmt(col.median())} .. {_fmt(col.max())} (min .. median .. max)"
         else:
             counts = col.astype(str).value_counts().sort_index()
             drawn = ", ".join(f"{k} x {v}" for k, v in counts.items()) or "-"
+            if key == "target.image":
+                drawn += " (samples with layout image)"
         rows.append([f"`{key}`", described.replace("|", "/"), drawn.replace("|", "/")])
     return rows
 
 
-def write_card(out: Path, spec: DatasetSpec, df: pd.DataFrame, command: str | None = None) -> Path:
+def write_card(
+    out: Path,
+    spec: DatasetSpec,
+    df: pd.DataFrame,
+    command: str | None = None,
+    provenance: dict[str, Any] | None = None,
+) -> Path:
     """Write ``DIR/README.md`` and ``DIR/thumbnails.png`` for the dataset in ``out`` with
-    manifest ``df`` (:func:`bench_sim.experiments.dataset.manifest_frame`)."""
+    manifest ``df`` (:func:`bench_sim.experiments.dataset.manifest_frame`); ``provenance``
+    (version, seed, hashes) goes into the PNG."""
     from bench_sim.io import format_bytes, write_text
 
     info = read_info(out)
@@ -150,7 +174,7 @@ def write_card(out: Path, spec: DatasetSpec, df: pd.DataFrame, command: str | No
     failed = int((df.status == "failed").sum())
     is_done = len(complete) == spec.samples
     shown = complete[:THUMBNAIL_SAMPLES]
-    write_thumbnails(out, spec, shown)
+    write_thumbnails(out, spec, shown, provenance)
     lines, cols = spec.base.lines, spec.base.sensor.columns
     store_bytes = sum(f.stat().st_size for f in (out / DATA_STORE).rglob("*") if f.is_file())
     per_sample = store_bytes / max(len(complete), 1)
@@ -219,16 +243,19 @@ def write_card(out: Path, spec: DatasetSpec, df: pd.DataFrame, command: str | No
     done = df[df.status == "complete"]
     if len(done):
         md += ["### Summary metrics", ""]
-        md += _table(["metric", "min", "median", "max"], [
-            [f"`{c}`", done[c].min(), done[c].median(), done[c].max()] for c in metric_cols
-        ]) + [""]
+        md += _table(["metric", "samples with a value", "min", "median", "max"], [
+            [f"`{c}`", int(done[c].notna().sum()), done[c].min(), done[c].median(), done[c].max()]
+            for c in metric_cols
+        ]) + ["", "A metric has no value (`nan`) where its region clipped entirely at that stage.", ""]
     if len(done) and spec.samples <= LISTED_SAMPLES:
         keys = list(spec.randomize)
         head = ["sample", *[f"`{k}`" for k in keys], "scene_dr_db",
                 *[f"sat. m={m}" for m in spec.stages]]
         rows = []
         for d in done.to_dict("records"):
-            vals = [Path(d[k]).name if k == "target.image" and isinstance(d[k], str) else d[k] for k in keys]
+            vals = [
+                (Path(d[k]).name if _uses(spec, k, d) else "-") if k == "target.image" else d[k] for k in keys
+            ]
             rows.append([d["sample"], *vals, d["scene_dr_db"],
                          *[d[f"saturated_fraction_m{m}"] for m in spec.stages]])
         md += ["### Samples", ""] + _table(head, rows) + [""]
