@@ -1,0 +1,122 @@
+"""Metrics of one simulation pass (a :class:`~bench_sim.experiments.simulate.PassResult` and its
+eq. 11 fusion): eq. 16-18 (omega of ``Gamma1``, ``Gamma2``, ``Gamma_HDR``), saturated fractions,
+the darkest and brightest wedge patches (SNR, level, clipping) and the paper's qualitative
+claims. ``reproduce`` and ``sweep`` both report them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bench_sim.config import BenchConfig
+from bench_sim.metrics.histogram import Eq18Result
+
+__all__ = ["PassMetrics", "pass_metrics", "patch_slices", "spatial_snr", "SNR_IN_NOISE", "SNR_ROSE"]
+
+#: SNR below which a patch counts as "in the noise", and the Rose criterion for "out of it"
+SNR_IN_NOISE = 2.0
+SNR_ROSE = 3.0
+
+
+@dataclass(frozen=True)
+class PassMetrics:
+    """What :func:`pass_metrics` returns (the dicts are ``metrics.json``'s entries)."""
+
+    eq18: Eq18Result
+    saturated_fraction: dict[str, float]
+    darkest_patch: dict[str, Any]
+    brightest_patch: dict[str, Any]
+    qualitative: dict[str, bool]
+
+
+def patch_slices(panel: Any, geom: Any, cfg: BenchConfig, lines: int) -> dict[str, tuple[slice, slice]]:
+    """Patch name -> (line slice, column slice) in the output images."""
+    scale = geom.object_pixel_m / geom.delta_m  # panel pixels -> lines (1 in sync)
+    n = cfg.sensor.columns
+    off = n / 2.0 - cfg.target.panel_columns / 2.0 - 0.5  # column = v + off
+    out = {}
+    for p in panel.patches:
+        l0, l1 = math.ceil(p.u0 * scale), math.floor(p.u1 * scale)
+        c0, c1 = math.ceil(p.v0 + off), math.floor(p.v1 + off)
+        if 0 <= l0 < l1 <= lines and 0 <= c0 < c1 <= n:
+            out[p.name] = (slice(l0, l1), slice(c0, c1))
+    return out
+
+
+def spatial_snr(img: np.ndarray, sl: tuple[slice, slice]) -> float:
+    """Mean over standard deviation of the pixels of a region (``inf`` for a constant one)."""
+    region = np.asarray(img[sl], dtype=np.float64)
+    sd = float(region.std())
+    return float(region.mean() / sd) if sd > 0 else float("inf")
+
+
+def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
+    """Metrics of a pass's stage images ``fusion.mu1``, ``fusion.mu2`` and their fusion.
+
+    Parameters
+    ----------
+    cfg
+        The bench of the pass.
+    sim
+        The :class:`~bench_sim.experiments.simulate.PassResult` (stage words with their pedestal,
+        render set-up with the target panel and geometry).
+    fused
+        :func:`bench_sim.fusion.paper.fuse_dtdi_hdr_eq11` of the two stages, offsets removed.
+    """
+    from bench_sim.metrics.histogram import evaluate_eq18
+    from bench_sim.sensor.model import stage_offset_dn
+
+    mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
+    lines = cfg.lines
+    setup = sim.setup
+    g1, g2 = sim.stage_dn[mu1], sim.stage_dn[mu2]
+    off1, off2 = (stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2))
+    s1, s2 = g1 - off1, g2 - off2
+    # eq. 16-17 count the values of the stored words; the HDR carries Gamma2's offset likewise
+    eq18 = evaluate_eq18(g1, g2, fused.hdr + off2, mu1=mu1, mu2=mu2, beta=beta)
+    clip = 2**beta - 1
+    panel = setup.grid.panel
+    patches = patch_slices(panel, setup.geom, cfg, lines)
+    right = {k: v for k, v in patches.items() if k.startswith("wedge_right")}
+    left = {k: v for k, v in patches.items() if k.startswith("wedge_left")}
+    refl = {p.name: p.reflectance for p in panel.patches}
+    darkest = min(right, key=refl.__getitem__)
+    brightest = max(left, key=refl.__getitem__)
+    images = {"gamma1": s1, "gamma2": s2, "gamma_hdr": fused.hdr}
+    snr_dark = {k: spatial_snr(v, right[darkest]) for k, v in images.items()}
+    sat = {
+        "gamma1": float(np.mean(g1 >= clip)),
+        "gamma2": float(np.mean(g2 >= clip)),
+        "gamma_hdr": float(np.mean(fused.saturated)),
+    }
+    bsl = left[brightest]
+    bright = {
+        "patch": brightest,
+        "reflectance": refl[brightest],
+        "gamma1_mean_dn": float(s1[bsl].mean()),
+        "gamma1_fraction_of_phi_fs": float(s1[bsl].mean() / 2**beta),
+        "gamma2_saturated_fraction": float(np.mean(g2[bsl] >= clip)),
+        "gamma_hdr_saturated_fraction": float(np.mean(fused.saturated[bsl])),
+    }
+    dark = {
+        "patch": darkest,
+        "reflectance": refl[darkest],
+        "snr": snr_dark,
+        # pixels of the patch stored as 0 DN (clipped by the word): 0 with a pedestal above the noise
+        "word_zero_fraction": {
+            k: float(np.mean(v[right[darkest]] <= 0)) for k, v in (("gamma1", g1), ("gamma2", g2))
+        },
+    }
+    # "in the noise": below SNR 2; "out of the noise": the Rose criterion, SNR >= 3
+    qualitative = {
+        "stage_mu2_saturates_bright_region": bright["gamma2_saturated_fraction"] > 0.99,
+        "stage_mu1_leaves_darkest_patch_in_noise": snr_dark["gamma1"] < SNR_IN_NOISE,
+        "hdr_keeps_bright_unsaturated": bright["gamma_hdr_saturated_fraction"] == 0.0,
+        "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
+        and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
+    }
+    return PassMetrics(eq18, sat, dark, bright, qualitative)
