@@ -1,7 +1,13 @@
 """Metrics of one simulation pass (a :class:`~bench_sim.experiments.simulate.PassResult` and its
 eq. 11 fusion): eq. 16-18 (omega of ``Gamma1``, ``Gamma2``, ``Gamma_HDR``), saturated fractions,
-the darkest and brightest wedge patches (SNR, level, clipping) and the paper's qualitative
-claims. ``reproduce`` and ``sweep`` both report them.
+the darkest and brightest wedge patches (spatial SNR, level, clipping) and the paper's
+qualitative claims. ``reproduce`` and ``sweep`` both report them.
+
+All of them are *scene-referred*: they depend on the lights and the target as much as on the
+camera (unlike the dynamic range measured through the chain,
+:mod:`bench_sim.experiments.chain_dr`). The darkest and brightest patches are the wedge steps
+(of either half of the ``paper`` target) with the lowest and highest mean ``Gamma_HDR``, i.e.
+as lit; other targets have no wedge and give ``None`` with the reason.
 """
 
 from __future__ import annotations
@@ -24,13 +30,19 @@ SNR_ROSE = 3.0
 
 @dataclass(frozen=True)
 class PassMetrics:
-    """What :func:`pass_metrics` returns (the dicts are ``metrics.json``'s entries)."""
+    """What :func:`pass_metrics` returns (the dicts are ``metrics.json``'s entries).
+
+    ``darkest_patch``, ``brightest_patch`` and ``qualitative`` are ``None`` when the image holds
+    no wedge patch (targets other than ``paper``, or too few lines); ``no_patches`` then says
+    why.
+    """
 
     eq18: Eq18Result
     saturated_fraction: dict[str, float]
-    darkest_patch: dict[str, Any]
-    brightest_patch: dict[str, Any]
-    qualitative: dict[str, bool]
+    darkest_patch: dict[str, Any] | None
+    brightest_patch: dict[str, Any] | None
+    qualitative: dict[str, bool] | None
+    no_patches: str | None = None
 
 
 def patch_slices(panel: Any, geom: Any, cfg: BenchConfig, lines: int) -> dict[str, tuple[slice, slice]]:
@@ -80,23 +92,33 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
     eq18 = evaluate_eq18(g1, g2, fused.hdr + off2, mu1=mu1, mu2=mu2, beta=beta)
     clip = 2**beta - 1
     panel = setup.grid.panel
-    patches = patch_slices(panel, setup.geom, cfg, lines)
-    right = {k: v for k, v in patches.items() if k.startswith("wedge_right")}
-    left = {k: v for k, v in patches.items() if k.startswith("wedge_left")}
-    refl = {p.name: p.reflectance for p in panel.patches}
-    darkest = min(right, key=refl.__getitem__)
-    brightest = max(left, key=refl.__getitem__)
-    images = {"gamma1": s1, "gamma2": s2, "gamma_hdr": fused.hdr}
-    snr_dark = {k: spatial_snr(v, right[darkest]) for k, v in images.items()}
     sat = {
         "gamma1": float(np.mean(g1 >= clip)),
         "gamma2": float(np.mean(g2 >= clip)),
         "gamma_hdr": float(np.mean(fused.saturated)),
     }
-    bsl = left[brightest]
+    wedge = {k: v for k, v in patch_slices(panel, setup.geom, cfg, lines).items() if k.startswith("wedge_")}
+    if not wedge:
+        why = (
+            f"target.layout = {cfg.target.layout!r} has no wedge patches"
+            if not panel.patches
+            else f"no wedge patch lies wholly inside the {lines} lines x {cfg.sensor.columns} columns"
+        )
+        return PassMetrics(eq18, sat, None, None, None, why)
+    refl = {p.name: p.reflectance for p in panel.patches}
+    # the darkest and brightest patches in the scene as lit: lowest / highest mean of Gamma_HDR
+    level = {k: float(fused.hdr[v].mean()) for k, v in wedge.items()}
+    darkest = min(wedge, key=level.__getitem__)
+    brightest = max(wedge, key=level.__getitem__)
+    images = {"gamma1": s1, "gamma2": s2, "gamma_hdr": fused.hdr}
+    snr_dark = {k: spatial_snr(v, wedge[darkest]) for k, v in images.items()}
+    bsl = wedge[brightest]
+    snr_bright = {k: spatial_snr(v, bsl) for k, v in images.items()}
     bright = {
         "patch": brightest,
         "reflectance": refl[brightest],
+        # a patch clipped flat has no SNR: None
+        "snr": {k: (x if math.isfinite(x) else None) for k, x in snr_bright.items()},
         "gamma1_mean_dn": float(s1[bsl].mean()),
         "gamma1_fraction_of_phi_fs": float(s1[bsl].mean() / 2**beta),
         "gamma2_saturated_fraction": float(np.mean(g2[bsl] >= clip)),
@@ -108,7 +130,7 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
         "snr": snr_dark,
         # pixels of the patch stored as 0 DN (clipped by the word): 0 with a pedestal above the noise
         "word_zero_fraction": {
-            k: float(np.mean(v[right[darkest]] <= 0)) for k, v in (("gamma1", g1), ("gamma2", g2))
+            k: float(np.mean(v[wedge[darkest]] <= 0)) for k, v in (("gamma1", g1), ("gamma2", g2))
         },
     }
     # "in the noise": below SNR 2; "out of the noise": the Rose criterion, SNR >= 3
