@@ -35,6 +35,12 @@ class PassMetrics:
     ``darkest_patch``, ``brightest_patch`` and ``qualitative`` are ``None`` when the image holds
     no wedge patch (targets other than ``paper``, or too few lines); ``no_patches`` then says
     why.
+
+    With the pass's truth (``run_pass(..., truth=True)``) the wedge also measures ranges in scene
+    terms, from each patch's mean photons (exact, noise-free): ``scene_range_db``, the range of
+    the wedge as lit, ``20 lg(brightest / darkest)``; ``captured_range_db[image]``, the range of
+    the patches the image renders usefully (spatial SNR >= 1 and less than half its pixels
+    clipped), ``None`` when it renders none.
     """
 
     eq18: Eq18Result
@@ -43,6 +49,8 @@ class PassMetrics:
     brightest_patch: dict[str, Any] | None
     qualitative: dict[str, bool] | None
     no_patches: str | None = None
+    scene_range_db: float | None = None
+    captured_range_db: dict[str, float | None] | None = None
 
 
 def patch_slices(panel: Any, geom: Any, cfg: BenchConfig, lines: int) -> dict[str, tuple[slice, slice]]:
@@ -141,4 +149,23 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
         "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
         and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
     }
-    return PassMetrics(eq18, sat, dark, bright, qualitative)
+    scene_range = captured = None
+    if "photons" in sim.dataset:
+        photons = sim.dataset["photons"].sel(stage=mu2).values
+        level = {k: float(photons[v].mean()) for k, v in wedge.items()}
+        scene_range = _range_db([level[k] for k in wedge])
+        clipped = {"gamma1": g1 >= clip, "gamma2": g2 >= clip, "gamma_hdr": fused.saturated}
+        captured = {}
+        for name, img in images.items():
+            usable = [
+                level[k] for k, sl in wedge.items()
+                if spatial_snr(img, sl) >= 1.0 and float(np.mean(clipped[name][sl])) < 0.5
+            ]
+            captured[name] = _range_db(usable) if usable else None
+    return PassMetrics(eq18, sat, dark, bright, qualitative, None, scene_range, captured)
+
+
+def _range_db(levels: list[float]) -> float:
+    """``20 lg(max / min)`` of positive levels [dB] (0 for one level)."""
+    lo, hi = min(levels), max(levels)
+    return float(20.0 * np.log10(hi / lo)) if lo > 0 else float("inf")
