@@ -151,16 +151,17 @@ _KINDS = {
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("engine", ["reference", "fast"])
 @pytest.mark.parametrize("kind", list(_KINDS))
-def test_each_kind_gives_its_stated_irradiance_on_the_drum(kind: str) -> None:
+def test_each_kind_gives_its_stated_irradiance_on_the_drum(kind: str, engine: str) -> None:
     """A uniform print of albedo rho shows the radiance rho E / pi (Lambert) under a light of
-    irradiance E at the point the camera looks at."""
+    irradiance E at the point the camera looks at, on both engines."""
     table, cos_incidence = _KINDS[kind]
     e, rho = 10.0, 0.5
     cfg = tiny_cfg(
         lights=dict(OFF, lamp={"kind": kind, "irradiance_w_m2": e, **table}),
         target={"layout": "uniform", "uniform_reflectance": rho},
-        render={"spp": 32, "engine": "reference"},
+        render={"spp": 32, "engine": engine},
     )
     setup = prepare(cfg, 1, np.random.default_rng(0))
     centre = setup.engine.radiance_frames(0, 1)[0, 5:7, 20:28]
@@ -194,18 +195,21 @@ def test_reference_engine_weights_each_frame_without_recompiling() -> None:
 
 
 @pytest.mark.slow
-def test_flicker_banding_falls_with_the_stage_as_averaging_a_sinusoid_over_m_periods() -> None:
+@pytest.mark.parametrize("engine", ["reference", "fast"])
+def test_flicker_banding_falls_with_the_stage_as_averaging_a_sinusoid_over_m_periods(engine: str) -> None:
     """The issue's test 6: a fill with flicker_depth = 1 at 100 Hz over a uniform print, line
     period T = 1 ms (10 lines per flicker period). Nothing imposes the banding: each frame gets
     its window's mean intensity, and DTDI sums the frames. The along-track amplitude of stage m,
     relative to its mean, must be that of a sinusoid averaged over m line periods,
-    |sin(pi f m T) / (pi f m T)| -- vanishing at m = 10, a whole period."""
+    |sin(pi f m T) / (pi f m T)| -- vanishing at m = 10, a whole period. Both engines: the
+    reference one renders each frame with the light's weight, the fast one forms each frame as
+    the weighted sum of its per-light records."""
     f, period = 100.0, 1e-3
     cfg = tiny_cfg(
         lights={"strong": {"enabled": False},
                 "weak": {"irradiance_w_m2": 10.0, "flicker_hz": f, "flicker_depth": 1.0}},
         target={"layout": "uniform"}, sensor=ALL_OFF, timing={"line_period_s": period},
-        render={"spp": 4, "engine": "reference"}, lines=40, fusion={"mu1": 2, "mu2": 10},
+        render={"spp": 4, "engine": engine}, lines=40, fusion={"mu1": 2, "mu2": 10},
     )
     stages = list(range(1, 11))
     res = run_pass(cfg, stages, 0, truth=False)
