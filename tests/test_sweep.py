@@ -56,8 +56,8 @@ key = "lights.weak.irradiance_w_m2"
 logspace = { start = 3.0, stop = 12.0, num = 2 }
 """
 
-#: columns that depend on where and when a point ran
-RUN_COLUMNS = ["wall_s", "worker"]
+#: columns that depend on where and when a point ran (renders: which worker rendered the records first)
+RUN_COLUMNS = ["wall_s", "worker", "mitsuba_renders"]
 
 
 def _write(folder: Path, name: str, text: str) -> Path:
@@ -288,6 +288,34 @@ def test_resume_after_a_kill_finishes_only_the_missing_points(
     pd.testing.assert_frame_equal(_metrics(out), _metrics(one_worker))
     sessions = json.loads((out / "sweep.json").read_text())["sessions"]
     assert [s["resumed"] for s in sessions] == [False, True] and sessions[1]["ran"] == summary.ran
+
+
+@pytest.mark.slow
+def test_light_power_sweep_renders_once_and_its_frames_equal_a_fresh_render(
+    spec_dir: Path, tmp_path: Path
+) -> None:
+    """The issue's test 5: a sweep of the spot's power on the fast engine makes one set of
+    Mitsuba renders (hit positions, then each light alone) for all its points, and the frames
+    of a swept power formed from those records equal a fresh render at that power."""
+    from bench_sim.render.exposures import render_photons
+    from bench_sim.render.records import clear_record_cache
+
+    body = ('base = "tiny.toml"\nseed = 3\n[[parameters]]\nkey = "lights.strong.irradiance_w_m2"\n'
+            "values = [16.0, 64.0, 256.0]\n")
+    spec = _write(spec_dir, "power.toml", body)
+    clear_record_cache()
+    summary = run_sweep(spec, tmp_path / "power", workers=0, progress=False, plots=False)
+    renders = [summary.records[i]["metrics"]["mitsuba_renders"] for i in range(3)]
+    assert renders == [3, 0, 0]
+    assert json.loads((tmp_path / "power" / "sweep.json").read_text())["mitsuba_renders"] == 3
+    assert "3 Mitsuba renders in all" in (tmp_path / "power" / "report.md").read_text()
+    cfg = load_spec(spec).points[2].cfg
+    reused, setup = render_photons(cfg, 4, np.random.default_rng(0))
+    assert setup.info["mitsuba_renders"] == 0
+    clear_record_cache()
+    fresh, setup = render_photons(cfg, 4, np.random.default_rng(0))
+    assert setup.info["mitsuba_renders"] == 3
+    np.testing.assert_allclose(reused, fresh, rtol=1e-6, atol=1e-6 * float(fresh.mean()))
 
 
 # --- banding measurement -------------------------------------------------------------------------
