@@ -173,6 +173,22 @@ def test_bad_specs_name_the_key_before_anything_runs(
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--workers", "1", "--scheduler", "tcp://127.0.0.1:9"], "--workers and --scheduler: give one"),
+        (["--workers", "-2"], "--workers = -2: must be >= 0"),
+    ],
+)
+def test_bad_worker_options_are_one_line(spec_dir: Path, tmp_path: Path, args: list, message: str) -> None:
+    out = tmp_path / "o"
+    result = CliRunner().invoke(app, ["sweep", str(spec_dir / "lights.toml"), "--out", str(out), *args])
+    assert result.exit_code == 2
+    assert len(result.output.strip().splitlines()) == 1
+    assert result.output.startswith(f"bench-sim: error: {message}")
+    assert not out.exists()
+
+
 # --- runs ---------------------------------------------------------------------------------------
 
 
@@ -316,6 +332,35 @@ def test_light_power_sweep_renders_once_and_its_frames_equal_a_fresh_render(
     fresh, setup = render_photons(cfg, 4, np.random.default_rng(0))
     assert setup.info["mitsuba_renders"] == 3
     np.testing.assert_allclose(reused, fresh, rtol=1e-6, atol=1e-6 * float(fresh.mean()))
+
+
+@pytest.mark.slow
+def test_a_failed_point_is_recorded_and_the_sweep_goes_on(
+    spec_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A point that raises is written with its one-line error and empty metrics; the others
+    finish, the outputs hold them all, and --resume runs the failed point alone."""
+    from bench_sim.experiments import sweep
+
+    real = sweep.measure_point
+
+    def flaky(task):
+        if task.index == 2:
+            raise MemoryError("worker ran out of memory\nsecond line")
+        return real(task)
+
+    monkeypatch.setattr(sweep, "measure_point", flaky)
+    out = tmp_path / "flaky"
+    summary = run_sweep(spec_dir / "lights.toml", out, workers=0, progress=False, plots=False)
+    assert (summary.ok, summary.failed) == (3, 1)
+    df = pd.read_csv(out / "points.csv", comment="#")
+    assert list(df["status"]) == ["ok", "ok", "failed", "ok"]
+    assert df.loc[2, "error"] == "MemoryError: worker ran out of memory" and np.isnan(df.loc[2, "dr_db_hdr"])
+    assert json.loads((out / "sweep.json").read_text())["status"] == "complete_with_failures"
+    assert "point 2 (" in (out / "report.md").read_text()
+    monkeypatch.setattr(sweep, "measure_point", real)
+    again = run_sweep(spec_dir / "lights.toml", out, workers=0, resume=True, progress=False, plots=False)
+    assert again.ran == [2] and again.failed == 0
 
 
 # --- banding measurement -------------------------------------------------------------------------

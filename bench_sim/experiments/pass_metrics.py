@@ -36,11 +36,15 @@ class PassMetrics:
     no wedge patch (targets other than ``paper``, or too few lines); ``no_patches`` then says
     why.
 
-    With the pass's truth (``run_pass(..., truth=True)``) the wedge also measures ranges in scene
-    terms, from each patch's mean photons (exact, noise-free): ``scene_range_db``, the range of
-    the wedge as lit, ``20 lg(brightest / darkest)``; ``captured_range_db[image]``, the range of
-    the patches the image renders usefully (spatial SNR >= 1 and less than half its pixels
-    clipped), ``None`` when it renders none.
+    With the pass's truth (``run_pass(..., truth=True)``) the patches are ranked by their exact
+    mean photons instead of ``Gamma_HDR`` (which ties where it clips), and the wedge measures
+    ranges in scene terms: ``scene_range_db``, the range of the wedge as lit,
+    ``20 lg(brightest / darkest)``; ``captured_range_db[image]``, the range of the patches the
+    image renders usefully (spatial SNR at least :data:`SNR_ROSE` and under half its pixels
+    clipped), ``None`` when it renders none; ``clipped_fraction[image]``, the pixels whose value
+    is clipped anywhere in the chain (a read at full well or the ADC's top, or the word at its
+    top; ``Gamma_HDR``: in the stage it takes) -- unlike ``saturated_fraction`` (the word at its
+    top) it also sees a stage that clips on the pixel.
     """
 
     eq18: Eq18Result
@@ -51,6 +55,7 @@ class PassMetrics:
     no_patches: str | None = None
     scene_range_db: float | None = None
     captured_range_db: dict[str, float | None] | None = None
+    clipped_fraction: dict[str, float] | None = None
 
 
 def patch_slices(panel: Any, geom: Any, cfg: BenchConfig, lines: int) -> dict[str, tuple[slice, slice]]:
@@ -114,8 +119,11 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
         )
         return PassMetrics(eq18, sat, None, None, None, why)
     refl = {p.name: p.reflectance for p in panel.patches}
-    # the darkest and brightest patches in the scene as lit: lowest / highest mean of Gamma_HDR
-    level = {k: float(fused.hdr[v].mean()) for k, v in wedge.items()}
+    # the darkest and brightest patches in the scene as lit: lowest / highest mean photons (the
+    # truth) or mean of Gamma_HDR
+    truth = "photons" in sim.dataset
+    scene = sim.dataset["photons"].sel(stage=mu2).values if truth else fused.hdr
+    level = {k: float(scene[v].mean()) for k, v in wedge.items()}
     darkest = min(wedge, key=level.__getitem__)
     brightest = max(wedge, key=level.__getitem__)
     images = {"gamma1": s1, "gamma2": s2, "gamma_hdr": fused.hdr}
@@ -149,20 +157,21 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
         "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
         and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
     }
-    scene_range = captured = None
-    if "photons" in sim.dataset:
-        photons = sim.dataset["photons"].sel(stage=mu2).values
-        level = {k: float(photons[v].mean()) for k, v in wedge.items()}
-        scene_range = _range_db([level[k] for k in wedge])
-        clipped = {"gamma1": g1 >= clip, "gamma2": g2 >= clip, "gamma_hdr": fused.saturated}
-        captured = {}
-        for name, img in images.items():
-            usable = [
-                level[k] for k, sl in wedge.items()
-                if spatial_snr(img, sl) >= 1.0 and float(np.mean(clipped[name][sl])) < 0.5
-            ]
-            captured[name] = _range_db(usable) if usable else None
-    return PassMetrics(eq18, sat, dark, bright, qualitative, None, scene_range, captured)
+    if not truth:
+        return PassMetrics(eq18, sat, dark, bright, qualitative)
+    clip1, clip2 = (sim.dataset["clipped"].sel(stage=m).values for m in (mu1, mu2))
+    clipped = {"gamma1": clip1, "gamma2": clip2, "gamma_hdr": np.where(fused.source == mu1, clip1, clip2)}
+    captured = {}
+    for name, img in images.items():
+        usable = [
+            level[k] for k, sl in wedge.items()
+            if spatial_snr(img, sl) >= SNR_ROSE and float(np.mean(clipped[name][sl])) < 0.5
+        ]
+        captured[name] = _range_db(usable) if usable else None
+    return PassMetrics(
+        eq18, sat, dark, bright, qualitative, None, _range_db(list(level.values())), captured,
+        {k: float(np.mean(v)) for k, v in clipped.items()},
+    )
 
 
 def _range_db(levels: list[float]) -> float:

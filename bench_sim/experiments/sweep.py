@@ -38,6 +38,7 @@ an unfinished sweep is never overwritten.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import time
@@ -84,14 +85,19 @@ COLUMNS: dict[str, tuple[str, str, str]] = {
     "eq15_by_construction": ("1", CAMERA, "both stages clip on the output word with one offset: "
                              "the gain over Gamma2 is eq. 15 by construction"),
     "scene_range_db": ("dB", SCENE, "range of the wedge as lit: 20 lg(brightest / darkest step)"),
-    "captured_range_db_gamma1": ("dB", SCENE, "range of the wedge steps Gamma1 renders (SNR >= 1, "
+    "captured_range_db_gamma1": ("dB", SCENE, "range of the wedge steps Gamma1 renders (SNR >= 3, "
                                  "under half clipped)"),
     "captured_range_db_gamma2": ("dB", SCENE, "range of the wedge steps Gamma2 renders"),
     "captured_range_db_hdr": ("dB", SCENE, "range of the wedge steps Gamma_HDR renders"),
-    "captured_gain_db_vs_gamma1": ("dB", SCENE, "captured range of Gamma_HDR minus that of Gamma1"),
+    "captured_gain_db_vs_gamma1": ("dB", SCENE, "captured range of Gamma_HDR minus that of Gamma1 (in "
+                                   "steps of the wedge)"),
     "saturated_fraction_gamma1": ("1", SCENE, "pixels of Gamma1 at the word's top"),
     "saturated_fraction_gamma2": ("1", SCENE, "pixels of Gamma2 at the word's top"),
     "saturated_fraction_hdr": ("1", SCENE, "pixels of Gamma_HDR taken from a clipped Gamma1"),
+    "clipped_fraction_gamma1": ("1", SCENE, "pixels of Gamma1 clipped anywhere: a read at full well or "
+                                "the ADC top, or the word at its top"),
+    "clipped_fraction_gamma2": ("1", SCENE, "pixels of Gamma2 clipped anywhere in the chain"),
+    "clipped_fraction_hdr": ("1", SCENE, "pixels of Gamma_HDR clipped in the stage they come from"),
     "darkest_patch": ("1", SCENE, "the wedge step with the lowest Gamma_HDR"),
     "darkest_reflectance": ("1", SCENE, "its reflectance"),
     "snr_darkest_gamma1": ("1", SCENE, "spatial SNR of the darkest step in Gamma1"),
@@ -208,6 +214,7 @@ def measure_point(task: PointTask) -> dict[str, Any]:
     cap = pm.captured_range_db or {}
     for col, key in IMAGES:
         rec[f"captured_range_db_{col}"] = cap.get(key)
+        rec[f"clipped_fraction_{col}"] = (pm.clipped_fraction or {}).get(key)
     if cap.get("gamma_hdr") is not None and cap.get("gamma1") is not None:
         rec["captured_gain_db_vs_gamma1"] = cap["gamma_hdr"] - cap["gamma1"]
     for which, patch in (("darkest", pm.darkest_patch), ("brightest", pm.brightest_patch)):
@@ -445,7 +452,7 @@ def run_sweep(
         Called in this process with each point's record as it is written.
     """
     from bench_sim.experiments.execution import open_client, run_tasks
-    from bench_sim.experiments.sweep_report import write_outputs
+    from bench_sim.experiments.sweep_report import write_outputs, write_points_csv
     from bench_sim.io import OUTPUT_MARKER, write_json
 
     if workers is not None and scheduler is not None:
@@ -457,52 +464,49 @@ def run_sweep(
     plan = plan_sweep(spec_path, out, resume=resume)
     out = plan.out
     t0 = time.perf_counter()
-    old_sessions: list[dict[str, Any]] = []
-    if resume and (out / "sweep.json").is_file():
-        old_sessions = json.loads((out / "sweep.json").read_text()).get("sessions", [])
-    elif out.exists() and any(out.iterdir()):
-        shutil.rmtree(out)  # a finished bench_sim output set (checked): replaced by this run
-    out.mkdir(parents=True, exist_ok=True)
-    (out / OUTPUT_MARKER).unlink(missing_ok=True)  # unfinished from here on
     todo = plan.todo
-    session = {"resumed": bool(resume), "skipped": len(plan.done), "ran": [t.index for t in todo],
-               "workers": workers if scheduler is None else None, "scheduler": scheduler is not None}
-    sessions = [*old_sessions, session]
-    write_json(out / "sweep.json", _meta(plan, "running", sessions, {}))
-    records = {i: r for i, r in read_points(out).items()}
-    if not resume:
-        records = {}
-    records.update(plan.done)
+    # the cluster is reached (or started) before anything is written: an unreachable scheduler
+    # leaves no output behind
+    with open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext() as client:
+        old_sessions: list[dict[str, Any]] = []
+        if resume and (out / "sweep.json").is_file():
+            old_sessions = json.loads((out / "sweep.json").read_text()).get("sessions", [])
+        elif out.exists() and any(out.iterdir()):
+            shutil.rmtree(out)  # a finished bench_sim output set (checked): replaced by this run
+        out.mkdir(parents=True, exist_ok=True)
+        (out / OUTPUT_MARKER).unlink(missing_ok=True)  # unfinished from here on
+        session = {"resumed": bool(resume), "skipped": len(plan.done), "ran": [t.index for t in todo],
+                   "workers": workers if scheduler is None else None, "scheduler": scheduler is not None}
+        sessions = [*old_sessions, session]
+        write_json(out / "sweep.json", _meta(plan, "running", sessions, {}))
+        records = read_points(out) if resume else {}
+        records.update(plan.done)
 
-    def done(outcome: Any) -> None:
-        task = plan.tasks[outcome.index]
-        rec = _record(plan, task, outcome)
-        records[task.index] = rec
-        _write_journal(out, rec)
-        from bench_sim.experiments.sweep_report import write_points_csv
+        def done(outcome: Any) -> None:
+            task = plan.tasks[outcome.index]
+            rec = _record(plan, task, outcome)
+            records[task.index] = rec
+            _write_journal(out, rec)
+            write_points_csv(out, plan, records)
+            if on_point is not None:
+                on_point(rec)
 
-        write_points_csv(out, plan, records)
-        if on_point is not None:
-            on_point(rec)
+        indices = [t.index for t in todo]
+        if todo and progress:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    if todo:
-        with open_client(workers=workers, scheduler=scheduler) as client:
-            if progress:
-                from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+            columns = (TextColumn("[bold]sweep"), BarColumn(),
+                       TextColumn("{task.completed}/{task.total} points"), TimeElapsedColumn())
+            with Progress(*columns) as bar:
+                tid = bar.add_task("points", total=len(todo))
 
-                columns = (TextColumn("[bold]sweep"), BarColumn(),
-                           TextColumn("{task.completed}/{task.total} points"), TimeElapsedColumn())
-                with Progress(*columns) as bar:
-                    tid = bar.add_task("points", total=len(todo))
+                def done_bar(outcome: Any) -> None:
+                    done(outcome)
+                    bar.update(tid, advance=1)
 
-                    def done_bar(outcome: Any) -> None:
-                        done(outcome)
-                        bar.update(tid, advance=1)
-
-                    run_tasks(measure_point, todo, client=client, indices=[t.index for t in todo],
-                              on_result=done_bar)
-            else:
-                run_tasks(measure_point, todo, client=client, indices=[t.index for t in todo], on_result=done)
+                run_tasks(measure_point, todo, client=client, indices=indices, on_result=done_bar)
+        elif todo:
+            run_tasks(measure_point, todo, client=client, indices=indices, on_result=done)
     ok = sum(1 for r in records.values() if r["status"] == "ok")
     failed = len(records) - ok
     renders = sum(

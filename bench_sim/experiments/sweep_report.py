@@ -40,12 +40,15 @@ __all__ = ["write_points_csv", "write_outputs", "points_table", "to_dataset", "P
 PLOT_GROUPS: dict[str, tuple[str, tuple[str, ...]]] = {
     "measured DR (camera)": ("dB", ("dr_db_gamma1", "dr_db_gamma2", "dr_db_hdr")),
     "DR gain of Gamma_HDR (camera)": ("dB", ("gain_db_vs_gamma1", "gain_db_vs_gamma2", "eq15_db")),
+    "gain over Gamma1: camera DR and wedge captured": (
+        "dB", ("gain_db_vs_gamma1", "captured_gain_db_vs_gamma1")
+    ),
     "wedge range captured (scene)": (
         "dB",
         ("scene_range_db", "captured_range_db_gamma1", "captured_range_db_gamma2", "captured_range_db_hdr"),
     ),
-    "saturated fraction (scene)": ("1", ("saturated_fraction_gamma1", "saturated_fraction_gamma2",
-                                         "saturated_fraction_hdr")),
+    "clipped fraction (scene)": ("1", ("clipped_fraction_gamma1", "clipped_fraction_gamma2",
+                                       "clipped_fraction_hdr")),
     "SNR of the darkest step (scene)": ("1", ("snr_darkest_gamma1", "snr_darkest_gamma2", "snr_darkest_hdr")),
     "SNR of the brightest step (scene)": ("1", ("snr_brightest_gamma1", "snr_brightest_gamma2",
                                                 "snr_brightest_hdr")),
@@ -54,7 +57,7 @@ PLOT_GROUPS: dict[str, tuple[str, tuple[str, ...]]] = {
 #: Metrics drawn as heat maps of a two-parameter product.
 HEATMAPS = (
     "gain_db_vs_gamma1", "gain_db_vs_gamma2", "dr_db_hdr", "captured_gain_db_vs_gamma1", "scene_range_db",
-    "snr_darkest_hdr", "saturated_fraction_hdr",
+    "snr_darkest_hdr", "clipped_fraction_hdr",
 )
 #: |gain over Gamma2 - eq. 15| below which eq. 15 counts as holding [dB]
 EQ15_TOLERANCE_DB = 0.5
@@ -315,7 +318,10 @@ def _plot_key(out: Path, plan: SweepPlan, ds: Any, key: str, meta: Mapping[str, 
         if log:
             ax.set_xscale("log")
         if title.startswith(("omega", "SNR")):
-            ax.set_yscale("log")
+            shown = [v for ln in ax.get_lines() for v in np.asarray(ln.get_ydata(), dtype=float)]
+            pos = [v for v in shown if np.isfinite(v) and v > 0]
+            if pos and max(pos) / min(pos) >= 20:
+                ax.set_yscale("log")
         ax.set_title(title, fontsize=9)
         ax.set_xlabel(f"{key} [{_key_units(key)}]", fontsize=8)
         ax.set_ylabel(f"[{units}]", fontsize=8)
@@ -347,6 +353,8 @@ def _plot_heatmaps(out: Path, plan: SweepPlan, ds: Any, meta: Mapping[str, Any])
     for ax, col in zip(axes.flat, HEATMAPS, strict=False):
         arr = np.asarray(ds[col].transpose(ky, kx).values, dtype=np.float64)
         im = ax.imshow(arr, origin="lower", aspect="auto", cmap="viridis")
+        finite = arr[np.isfinite(arr)]
+        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
         ax.set_xticks(range(len(spec.values[kx])), [_label(v) for v in spec.values[kx]], fontsize=7)
         ax.set_yticks(range(len(spec.values[ky])), [_label(v) for v in spec.values[ky]], fontsize=7)
         ax.set_xlabel(f"{_short(kx)} [{_key_units(kx)}]", fontsize=8)
@@ -354,7 +362,9 @@ def _plot_heatmaps(out: Path, plan: SweepPlan, ds: Any, meta: Mapping[str, Any])
         if arr.size <= 120:
             for (i, j), v in np.ndenumerate(arr):
                 if np.isfinite(v):
-                    ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=6, color="w")
+                    bright = hi > lo and (v - lo) / (hi - lo) > 0.6  # viridis is light at the top
+                    ax.text(j, i, f"{v:.3g}", ha="center", va="center", fontsize=6,
+                            color="k" if bright else "w")
         fig.colorbar(im, ax=ax).ax.tick_params(labelsize=7)
         units, kind, _meaning = docs[col]
         ax.set_title(f"{col} [{units}] ({kind})", fontsize=8)
@@ -485,7 +495,10 @@ def _report(plan: SweepPlan, records: Mapping[int, Mapping[str, Any]], sessions:
     lines += _eq15_section(plan, ok)
     lines += ["", "## Points", ""]
     show = ["scene_range_db", "captured_gain_db_vs_gamma1", "gain_db_vs_gamma1", "gain_db_vs_gamma2",
-            "snr_darkest_hdr", "saturated_fraction_hdr"]
+            "snr_darkest_hdr", "clipped_fraction_hdr"]
+    ratios = {_num(r["metrics"].get("spot_fill_ratio")) for r in ok.values()}
+    if len(ratios) > 1:
+        show.insert(0, "spot_fill_ratio")
     show += [c for c in plan.columns if c.startswith("banding_")][:3]
     head = ["point", *(f"`{_short(k)}`" for k in spec.keys), *show, "status"]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
