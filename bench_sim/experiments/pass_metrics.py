@@ -44,7 +44,8 @@ class PassMetrics:
     clipped), ``None`` when it renders none; ``clipped_fraction[image]``, the pixels whose value
     is clipped anywhere in the chain (a read at full well or the ADC's top, or the word at its
     top; ``Gamma_HDR``: in the stage it takes) -- unlike ``saturated_fraction`` (the word at its
-    top) it also sees a stage that clips on the pixel.
+    top) it also sees a stage that clips on the pixel. The brightest patch then has no SNR in an
+    image where more than half of it is clipped.
     """
 
     eq18: Eq18Result
@@ -161,6 +162,9 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
         return PassMetrics(eq18, sat, dark, bright, qualitative)
     clip1, clip2 = (sim.dataset["clipped"].sel(stage=m).values for m in (mu1, mu2))
     clipped = {"gamma1": clip1, "gamma2": clip2, "gamma_hdr": np.where(fused.source == mu1, clip1, clip2)}
+    for name in images:  # a patch more than half clipped has no SNR either
+        if float(np.mean(clipped[name][bsl])) >= 0.5:
+            bright["snr"][name] = None
     captured = {}
     for name, img in images.items():
         usable = [

@@ -105,7 +105,8 @@ COLUMNS: dict[str, tuple[str, str, str]] = {
     "snr_darkest_hdr": ("1", SCENE, "spatial SNR of the darkest step in Gamma_HDR"),
     "brightest_patch": ("1", SCENE, "the wedge step with the highest Gamma_HDR"),
     "brightest_reflectance": ("1", SCENE, "its reflectance"),
-    "snr_brightest_gamma1": ("1", SCENE, "spatial SNR of the brightest step in Gamma1 (empty: clipped)"),
+    "snr_brightest_gamma1": ("1", SCENE, "spatial SNR of the brightest step in Gamma1 (empty: over half "
+                             "of it clipped)"),
     "snr_brightest_gamma2": ("1", SCENE, "spatial SNR of the brightest step in Gamma2 (empty: clipped)"),
     "snr_brightest_hdr": ("1", SCENE, "spatial SNR of the brightest step in Gamma_HDR (empty: clipped)"),
     "omega_gamma1": ("1", SCENE, "eq. 17 omega of Gamma1"),

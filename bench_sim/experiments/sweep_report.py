@@ -59,6 +59,8 @@ HEATMAPS = (
     "gain_db_vs_gamma1", "gain_db_vs_gamma2", "dr_db_hdr", "captured_gain_db_vs_gamma1", "scene_range_db",
     "snr_darkest_hdr", "clipped_fraction_hdr",
 )
+#: Resolution of the plots [dots per inch]
+DPI = 90
 #: |gain over Gamma2 - eq. 15| below which eq. 15 counts as holding [dB]
 EQ15_TOLERANCE_DB = 0.5
 
@@ -291,30 +293,34 @@ def _plot_key(out: Path, plan: SweepPlan, ds: Any, key: str, meta: Mapping[str, 
         order = np.argsort(np.asarray(vals)) if _numeric(vals) else np.arange(len(vals))
         x, ticks, log = _xaxis([vals[i] for i in order])
         combos = [()]
+    from matplotlib.lines import Line2D
+
+    # colour: the metric (legend in each panel); line style and marker: the values of the other
+    # keys (one legend for the figure); more than six combinations: their mean and range
     many = len(combos) > 6
     for ax, (title, (units, cols)) in zip(axes.flat, groups.items(), strict=False):
+        handles = []
         for ci, col in enumerate(cols):
             if col not in ds:
                 continue
             color = colors[ci % len(colors)]
+            handles.append(Line2D([], [], color=color, marker="o", ms=4, label=_short(col)))
             if spec.mode != "product":
                 y = np.asarray(sel[col].values, dtype=np.float64)[order]
-                ax.plot(x, y, marker="o", ls="-" if spec.mode == "sequential" else "none", color=color,
-                        label=_short(col))
-                continue
-            arr = np.asarray(sub[col].values, dtype=np.float64).reshape(len(x), -1)
-            if many:
-                mean = np.nanmean(arr, axis=1)
+                ax.plot(x, y, marker="o", ms=4, ls="-" if spec.mode == "sequential" else "none", color=color)
+            elif many:
+                arr = np.asarray(sub[col].values, dtype=np.float64).reshape(len(x), -1)
                 ax.fill_between(x, np.nanmin(arr, axis=1), np.nanmax(arr, axis=1), color=color, alpha=0.2)
-                ax.plot(x, mean, marker="o", color=color, label=f"{_short(col)} (mean, range)")
-                continue
-            for j, combo in enumerate(combos):
-                lab = _short(col) + "".join(f", {_short(o)} = {_label(spec.values[o][c])}"
-                                            for o, c in zip(others, combo, strict=True))
-                ax.plot(x, arr[:, j], ls=styles[j % len(styles)], marker=markers[j % len(markers)],
-                        color=color, label=lab, ms=4)
+                ax.plot(x, np.nanmean(arr, axis=1), marker="o", ms=4, color=color)
+            else:
+                arr = np.asarray(sub[col].values, dtype=np.float64).reshape(len(x), -1)
+                for j in range(len(combos)):
+                    ax.plot(x, arr[:, j], ls=styles[j % len(styles)], marker=markers[j % len(markers)],
+                            color=color, ms=4, lw=1.2)
         if ticks is not None:
             ax.set_xticks(x, ticks, rotation=30, fontsize=7)
+        elif not log and len(np.unique(x)) <= 8:
+            ax.set_xticks(np.unique(x), [_label(float(v)) for v in np.unique(x)])
         if log:
             ax.set_xscale("log")
         if title.startswith(("omega", "SNR")):
@@ -327,11 +333,29 @@ def _plot_key(out: Path, plan: SweepPlan, ds: Any, key: str, meta: Mapping[str, 
         ax.set_ylabel(f"[{units}]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=6)
-    for ax in list(axes.flat)[len(groups):]:
-        ax.set_visible(False)
+        ax.legend(handles=handles, fontsize=6)
+    spare = list(axes.flat)[len(groups):]
+    for ax in spare:
+        ax.set_axis_off()
+    if spec.mode == "product" and others:
+        over = ", ".join(map(_short, others))
+        if many:
+            keys = [Line2D([], [], color="0.4", label=f"mean and range over {over}")]
+        else:
+            keys = [
+                Line2D([], [], color="0.4", ls=styles[j % len(styles)], marker=markers[j % len(markers)],
+                       ms=4, label=", ".join(f"{_short(o)} = {_label(spec.values[o][c])}"
+                                             for o, c in zip(others, combo, strict=True)))
+                for j, combo in enumerate(combos)
+            ]
+        if spare:
+            spare[0].legend(handles=keys, loc="center", fontsize=7, title=f"line style: {over}",
+                            title_fontsize=7)
+        else:
+            fig.legend(handles=keys, loc="lower center", fontsize=7, ncol=min(len(keys), 6))
+            fig.subplots_adjust(bottom=0.12)
     fig.suptitle(f"sweep {spec.name}: metrics against {key}", fontsize=10)
-    return write_figure_png(out / "plots" / f"{_safe(key)}.png", fig, meta)
+    return write_figure_png(out / "plots" / f"{_safe(key)}.png", fig, meta, dpi=DPI)
 
 
 def _plot_heatmaps(out: Path, plan: SweepPlan, ds: Any, meta: Mapping[str, Any]) -> Path:
@@ -371,7 +395,7 @@ def _plot_heatmaps(out: Path, plan: SweepPlan, ds: Any, meta: Mapping[str, Any])
     for ax in list(axes.flat)[len(HEATMAPS):]:
         ax.set_visible(False)
     fig.suptitle(f"sweep {spec.name}: {ky} x {kx}", fontsize=10)
-    return write_figure_png(out / "plots" / "heatmaps.png", fig, meta)
+    return write_figure_png(out / "plots" / "heatmaps.png", fig, meta, dpi=DPI)
 
 
 def _short(name: str) -> str:
@@ -543,9 +567,7 @@ def _eq15_section(plan: SweepPlan, ok: Mapping[int, Mapping[str, Any]]) -> list[
     for cam in cams.values():
         m = cam["metrics"]
         pts = cam["points"]
-        where = "; ".join(
-            f"`{_short(k)}` = {', '.join(sorted({_label(ok[i]['values'][k]) for i in pts}))}" for k in keys
-        )
+        where = "; ".join(f"`{_short(k)}` = {_distinct([ok[i]['values'][k] for i in pts])}" for k in keys)
         err = _num(m.get("eq15_error_db"))
         holds = abs(err) <= EQ15_TOLERANCE_DB if math.isfinite(err) else None
         out.append(
@@ -555,6 +577,14 @@ def _eq15_section(plan: SweepPlan, ok: Mapping[int, Mapping[str, Any]]) -> list[
             f"| {_fmt(m.get('eq15_by_construction'))} | {_fmt(m.get('gain_db_vs_gamma1'))} |"
         )
     return out
+
+
+def _distinct(values: Sequence[Any]) -> str:
+    """The distinct values, in order (numbers ascending), as text."""
+    uniq = list({_label(v): v for v in values}.values())
+    if _numeric(uniq):
+        uniq = sorted(uniq)
+    return ", ".join(_label(v) for v in uniq)
 
 
 def write_outputs(out: Path, plan: SweepPlan, records: Mapping[int, Mapping[str, Any]],
