@@ -188,6 +188,65 @@ def simulate(
     run_simulate(config, stages=stages, seed=seed, out=out, fmt=fmt)
 
 
+@app.command()
+@_user_errors
+def dataset(
+    spec: Annotated[Path, typer.Argument(help="dataset spec (TOML), e.g. scenes/datasets/example.toml")],
+    out: Annotated[Path, typer.Option("--out", help="dataset folder")],
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", help="worker processes of a local Dask cluster (default: the cores; "
+                     "0: this process)"),
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option("--scheduler", help="address of a running Dask scheduler (tcp://HOST:PORT)")
+    ] = None,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="complete a stopped run: skip complete samples, redo the rest")
+    ] = False,
+    only: Annotated[
+        list[int] | None, typer.Option("--only", help="make just sample I (repeatable), identically")
+    ] = None,
+) -> None:
+    """Synthetic validation dataset: many samples with exact ground truth, sharded per sample in
+    DIR/data.zarr, a manifest, a dataset card; resumable, on Dask."""
+    from bench_sim.experiments.dataset import main_summary, run_dataset
+
+    command = f"bench-sim dataset {spec} --out {out}"  # what remakes it (workers change nothing)
+    run = run_dataset(
+        spec, out, workers=workers, scheduler=scheduler, resume=resume, only=only,
+        progress=sys.stderr.isatty(), command=command,
+    )
+    print(main_summary(run))
+    if run.failed:
+        raise typer.Exit(1)
+
+
+@app.command()
+@_user_errors
+def sweep(
+    spec: Annotated[Path, typer.Argument(help="sweep spec (TOML): base config, [[parameters]], mode, seed")],
+    out: Annotated[Path, typer.Option("--out", help="output folder")],
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", help="worker processes of a local Dask cluster (default: the cores; 0: "
+                     "run in this process)"),
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option("--scheduler", help="address of a running Dask scheduler, tcp://HOST:PORT")
+    ] = None,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="finish a killed sweep: skip its finished points")
+    ] = False,
+    plots: Annotated[bool, typer.Option("--plots/--no-plots", help="draw DIR/plots/")] = True,
+) -> None:
+    """Scenario study: one simulation pass per point of a parameter sweep, on Dask:
+    DIR/points.csv, sweep.nc, plots/, sweep.json, report.md."""
+    from bench_sim.experiments.sweep import run_sweep
+
+    run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, plots=plots)
+
+
 def main() -> None:  # pragma: no cover
     app()
 

@@ -31,6 +31,8 @@ __all__ = [
     "atomic_path",
     "output_set",
     "check_output_dir",
+    "check_free_space",
+    "format_bytes",
     "OUTPUT_MARKER",
     "write_json",
     "read_json",
@@ -177,6 +179,41 @@ def output_set(
         raise
 
 
+def format_bytes(n: float) -> str:
+    """``n`` bytes for a message: ``'512 B'``, ``'3.4 MiB'``, ``'2.1 TiB'`` (binary prefixes)."""
+    n = float(n)
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} EiB"  # pragma: no cover - unreachable
+
+
+def check_free_space(
+    out: str | os.PathLike[str], needed_bytes: int, what: str = "--out", detail: str = ""
+) -> int:
+    """Refuse, before any computation, an output that would not fit on its file system.
+
+    ``needed_bytes`` is the caller's estimate of what it will write under ``out`` (an upper
+    bound: e.g. uncompressed array sizes). Raises :class:`BenchSimError` (one line) when it
+    exceeds the free space of the file system holding ``out`` (or its nearest existing parent);
+    returns the free bytes otherwise. ``detail`` (e.g. ``"16 samples x 3.5 MiB"``) is shown in
+    the message.
+    """
+    out = Path(out).expanduser().resolve()
+    anc = out
+    while not anc.exists():
+        anc = anc.parent
+    free = shutil.disk_usage(anc).free
+    if needed_bytes > free:
+        how = f" ({detail})" if detail else ""
+        raise BenchSimError(
+            f"{what} = {str(out)!r}: needs about {format_bytes(needed_bytes)}{how} but its file system "
+            f"has {format_bytes(free)} free: free space, choose another disk or make less"
+        )
+    return int(free)
+
+
 def sha256_text(text: str) -> str:
     """SHA-256 hex digest of a UTF-8 string."""
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
@@ -310,14 +347,12 @@ def write_figure_png(
     import io as _io
 
     import matplotlib.pyplot as plt
-    from PIL import Image
 
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    buf = _io.BytesIO()  # encoded once, with the text chunk (Pillow's PngInfo through matplotlib)
+    fig.savefig(buf, format="png", dpi=dpi, pil_kwargs={"pnginfo": _png_info(metadata)})
     plt.close(fig)
-    buf.seek(0)
-    with Image.open(buf) as img, atomic_path(path) as tmp:
-        img.save(tmp, format="PNG", pnginfo=_png_info(metadata))
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(buf.getvalue())
     return Path(path)
 
 

@@ -35,10 +35,10 @@ import numpy as np
 from bench_sim import __version__
 from bench_sim.config import TRA_METHODS
 from bench_sim.errors import BenchSimError
-from bench_sim.fusion.common import BETA_MAX, BETA_MIN
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
 from bench_sim.fusion.tonemap import gamma_tra
 from bench_sim.io import read_image, write_exr, write_png
+from bench_sim.sensor.model import check_beta_bits
 
 __all__ = ["fuse_files", "check_stage_image"]
 
@@ -168,9 +168,7 @@ def fuse_files(
     """
     low_p, high_p, out_p = Path(low), Path(high), Path(out)
     tra_p = Path(tra) if tra is not None else None
-    beta = _check_int("--beta", beta)
-    if not BETA_MIN <= beta <= BETA_MAX:
-        raise BenchSimError(f"--beta = {beta}: output word bits must lie in {BETA_MIN}..{BETA_MAX}")
+    beta = check_beta_bits(_check_int("--beta", beta), "--beta")
     mu1 = _check_int("--mu1", mu1)
     mu2 = _check_int("--mu2", mu2)
     if mu1 < 1:

@@ -7,7 +7,8 @@ eq. 16-18, eq. 15, measured dynamic range through the whole chain) -> figures an
 Outputs (``results/paper`` by default): ``fig3_stages.png``, ``fig4_hdr.png``, ``gamma1.tiff``,
 ``gamma2.tiff`` (16-bit), ``gamma_hdr.exr`` (channels ``Y`` = Gamma_HDR [DN, stage-mu2 units] and
 ``source`` = the stage each pixel came from), ``gamma_tra.png``, ``table1.csv``, ``metrics.json``,
-``report.md``. Every file carries the config, seed and version.
+``report.md``, ``snr_vs_signal.png`` (SNR of Gamma1, Gamma2, Gamma_HDR versus signal from the
+photon-transfer series through the chain). Every file carries the config, seed and version.
 """
 
 from __future__ import annotations
@@ -37,10 +38,6 @@ PAPER = {
     "mu2": 80,
 }
 
-#: SNR below which a patch counts as "in the noise", and the Rose criterion for "out of it"
-SNR_IN_NOISE = 2.0
-SNR_ROSE = 3.0
-
 #: ``--quick``: the same experiment on a 512-column sensor and 256 lines (CI, first runs).
 QUICK_OVERRIDES: dict[str, Any] = {
     "lines": 256,
@@ -63,20 +60,6 @@ class _Timer:
         self.steps[name] = self.steps.get(name, 0.0) + seconds
 
 
-def _patch_slices(panel: Any, geom: Any, cfg: BenchConfig, lines: int) -> dict[str, tuple[slice, slice]]:
-    """Patch name -> (line slice, column slice) in the output images."""
-    scale = geom.object_pixel_m / geom.delta_m  # panel pixels -> lines (1 in sync)
-    n = cfg.sensor.columns
-    off = n / 2.0 - cfg.target.panel_columns / 2.0 - 0.5  # column = v + off
-    out = {}
-    for p in panel.patches:
-        l0, l1 = math.ceil(p.u0 * scale), math.floor(p.u1 * scale)
-        c0, c1 = math.ceil(p.v0 + off), math.floor(p.v1 + off)
-        if 0 <= l0 < l1 <= lines and 0 <= c0 < c1 <= n:
-            out[p.name] = (slice(l0, l1), slice(c0, c1))
-    return out
-
-
 def _box(panel: Any, cfg: BenchConfig, name: str, half: str, lines: int) -> tuple[int, int, int, int]:
     u0, u1, v0, v1 = panel.element_box(name, half)
     off = cfg.sensor.columns / 2.0 - cfg.target.panel_columns / 2.0
@@ -88,22 +71,16 @@ def _box(panel: Any, cfg: BenchConfig, name: str, half: str, lines: int) -> tupl
     )
 
 
-def _spatial_snr(img: np.ndarray, sl: tuple[slice, slice]) -> float:
-    region = np.asarray(img[sl], dtype=np.float64)
-    sd = float(region.std())
-    return float(region.mean() / sd) if sd > 0 else float("inf")
-
-
 def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False) -> dict[str, Any]:
     """Run the reproduction and write its outputs into ``out``. Returns ``metrics.json``'s dict."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from bench_sim.experiments.chain_dr import measure_chain_dynamic_range
+    from bench_sim.experiments.pass_metrics import pass_metrics
     from bench_sim.experiments.simulate import run_pass
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
     from bench_sim.fusion.tonemap import quantize_display, tone_map
     from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
-    from bench_sim.metrics.histogram import evaluate_eq18
     from bench_sim.sensor.model import stage_offset_dn
 
     out = Path(out)
@@ -143,9 +120,8 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     setup, stage_images = sim.setup, sim.stage_dn
     g1, g2 = stage_images[mu1], stage_images[mu2]
     # the stage words carry the pedestal (dtdi.pedestal_dn, + m*black unless subtracted): every
-    # consumer subtracts it; s1, s2 are the stage signals [DN]
+    # consumer subtracts it
     off1, off2 = (stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2))
-    s1, s2 = g1 - np.float32(off1), g2 - np.float32(off2)  # float32: exact for the words
 
     # 3. fusion and display transform
     t0 = time.perf_counter()
@@ -156,50 +132,13 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
 
     # 4. metrics
     t0 = time.perf_counter()
-    # eq. 16-17 count the values of the stored words; the HDR carries Gamma2's offset likewise
-    eq18 = evaluate_eq18(g1, g2, fused.hdr + off2, mu1=mu1, mu2=mu2, beta=beta)
-    clip = 2**beta - 1
-    dr = measure_chain_dynamic_range(cfg, rng, **({"n_levels": 24} if quick else {})).as_dict()
+    chain_dr = measure_chain_dynamic_range(cfg, rng, **({"n_levels": 24} if quick else {}))
+    dr = chain_dr.as_dict()
     panel = setup.grid.panel
-    patches = _patch_slices(panel, setup.geom, cfg, lines)
-    right = {k: v for k, v in patches.items() if k.startswith("wedge_right")}
-    left = {k: v for k, v in patches.items() if k.startswith("wedge_left")}
-    refl = {p.name: p.reflectance for p in panel.patches}
-    darkest = min(right, key=refl.__getitem__)
-    brightest = max(left, key=refl.__getitem__)
-    images = {"gamma1": s1, "gamma2": s2, "gamma_hdr": fused.hdr}
-    snr_dark = {k: _spatial_snr(v, right[darkest]) for k, v in images.items()}
-    sat = {
-        "gamma1": float(np.mean(g1 >= clip)),
-        "gamma2": float(np.mean(g2 >= clip)),
-        "gamma_hdr": float(np.mean(fused.saturated)),
-    }
-    bsl = left[brightest]
-    bright = {
-        "patch": brightest,
-        "reflectance": refl[brightest],
-        "gamma1_mean_dn": float(s1[bsl].mean()),
-        "gamma1_fraction_of_phi_fs": float(s1[bsl].mean() / 2**beta),
-        "gamma2_saturated_fraction": float(np.mean(g2[bsl] >= clip)),
-        "gamma_hdr_saturated_fraction": float(np.mean(fused.saturated[bsl])),
-    }
-    dark = {
-        "patch": darkest,
-        "reflectance": refl[darkest],
-        "snr": snr_dark,
-        # pixels of the patch stored as 0 DN (clipped by the word): 0 with a pedestal above the noise
-        "word_zero_fraction": {
-            k: float(np.mean(v[right[darkest]] <= 0)) for k, v in (("gamma1", g1), ("gamma2", g2))
-        },
-    }
-    # "in the noise": below SNR 2; "out of the noise": the Rose criterion, SNR >= 3
-    qualitative = {
-        "stage_mu2_saturates_bright_region": bright["gamma2_saturated_fraction"] > 0.99,
-        "stage_mu1_leaves_darkest_patch_in_noise": snr_dark["gamma1"] < SNR_IN_NOISE,
-        "hdr_keeps_bright_unsaturated": bright["gamma_hdr_saturated_fraction"] == 0.0,
-        "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
-        and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
-    }
+    pm = pass_metrics(cfg, sim, fused)
+    eq18, sat, dark, bright, qualitative = (
+        pm.eq18, pm.saturated_fraction, pm.darkest_patch, pm.brightest_patch, pm.qualitative
+    )
     eq15 = dr_increase_eq15_db(mu1, mu2)
     pairs = stage_pairs_for_db(PAPER["delta_psi_db"], FIG3_STAGES)
     timer.add("metrics", time.perf_counter() - t0)
@@ -219,12 +158,20 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         "rows": rows,
         "frames": frames,
         "stages": list(stages),
+        "fig3_stages": list(fig3),
         "delta_psi_db_eq15": eq15,
         "paper_delta_psi_db": PAPER["delta_psi_db"],
         "stage_pairs_26_02_db": [list(p) for p in pairs],
-        "dr_db": {("gamma_hdr" if k == "hdr" else k): v for k, v in dr["dr_db"].items()},
+        "dr_db": _images(dr["dr_db"]),
+        "dr_db_extrapolated": _images(dr["dr_db_extrapolated"]),
+        "dr_db_model": _images(dr["model_dr_db"]),
         "delta_dr_db_vs_gamma1": dr["delta_db_vs_gamma1"],
         "delta_dr_db_vs_gamma2": dr["delta_db_vs_gamma2"],
+        "delta_dr_db_vs_gamma2_extrapolated": dr["delta_db_vs_gamma2_extrapolated"],
+        "gain_over_gamma2_by_construction": dr["gain_over_gamma2_by_construction"],
+        "stage_clips_on_word": {"gamma1": dr["stage_clips_on_word"][str(mu1)],
+                                "gamma2": dr["stage_clips_on_word"][str(mu2)]},
+        "fusion_switch": dr["fusion_switch"],
         "dr_details": {k: v for k, v in dr.items() if k not in ("series",)},
         "omega": {"gamma1": eq18.omega1, "gamma2": eq18.omega2, "gamma_hdr": eq18.omega_hdr},
         "omega_paper": PAPER["omega"],
@@ -247,6 +194,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         "variant": setup.info["variant"],
     }
     _write_outputs(out, cfg, metrics, meta, stage_images, fig3, fused, tra8, panel, lines)
+    _snr_figure(out / "snr_vs_signal.png", chain_dr, meta)
     timer.add("write", time.perf_counter() - t0)
     metrics["timings_s"] = {k: round(v, 3) for k, v in timer.steps.items()}
     metrics["wall_s"] = round(time.perf_counter() - t_start, 3)
@@ -259,6 +207,29 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         print(f"  {step:<12} {s:8.2f} s")
     print(f"  {'total':<12} {metrics['wall_s']:8.2f} s  -> {out}")
     return metrics
+
+
+def _images(per_image: dict[str, Any]) -> dict[str, Any]:
+    """Chain-DR keys (``gamma1``, ``gamma2``, ``hdr``) -> metrics.json's (``gamma_hdr``)."""
+    return {("gamma_hdr" if k == "hdr" else k): v for k, v in per_image.items()}
+
+
+def _snr_figure(path: Path, chain_dr: Any, meta: dict[str, Any]) -> None:
+    from bench_sim.experiments.figures import snr_versus_signal_figure
+
+    names = {"gamma1": f"$\\Gamma_1$ (m = {chain_dr.mu1})", "gamma2": f"$\\Gamma_2$ (m = {chain_dr.mu2})",
+             "hdr": "$\\Gamma_{HDR}$ (eq. 11)"}
+    img = chain_dr.images
+    snr_versus_signal_figure(
+        chain_dr.photons,
+        {k: v.snr for k, v in img.items()},
+        {k: v.photons_min for k, v in img.items()},
+        {k: v.photons_sat for k, v in img.items()},
+        chain_dr.fusion_switch()["photons"],
+        path,
+        dict(meta, figure="SNR versus signal of Gamma1, Gamma2 and Gamma_HDR (photon-transfer series)"),
+        {k: f"{names[k]}: DR {v.dr_db:.1f} dB" for k, v in img.items()},
+    )
 
 
 def _write_outputs(
@@ -296,6 +267,7 @@ def _write_outputs(
     inset = max((wc1 - wc0) // 10, 1)
     dark_box = ((wl0 + wl1) // 2, wl1, wc0 + inset, wc1 - inset)
     bright_box = _box(panel, cfg, "vbars", "left", lines)
+    dark, bright = metrics["darkest_patch"], metrics["brightest_patch"]
     fig4_hdr(
         np.clip(fused.hdr.astype(np.float32) / np.float32(fused.full_scale_dn), 0, 1),
         tra8 / np.float32(255.0),
@@ -306,6 +278,12 @@ def _write_outputs(
         out / "fig4_hdr.png",
         meta,
         cfg.fusion.tra,
+        inset_titles=(
+            f"dark, $\\Gamma_1$: darkest step SNR {dark['snr']['gamma1']:.1f}",
+            f"dark, $\\Gamma_{{TRA}}$: darkest step, HDR SNR {dark['snr']['gamma_hdr']:.1f}",
+            f"bright, $\\Gamma_2$: {bright['gamma2_saturated_fraction']:.0%} clipped",
+            f"bright, $\\Gamma_{{TRA}}$: {bright['gamma_hdr_saturated_fraction']:.0%} clipped",
+        ),
     )
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")

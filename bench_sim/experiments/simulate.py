@@ -127,6 +127,9 @@ class PassResult:
         ``dataset.dn``).
     setup
         The render set-up (geometry, target grid and panel, engine info, backend).
+    truth
+        Whether the pass computed the truth (``dataset`` then has ``mean_dn``, ``photons``,
+        ``reflectance``, ``clipped``); reading it does not build the dataset.
     timings_s
         Seconds per step: ``render_setup``; ``render_frames``, ``sensor_dtdi``, ``truth``
         (busy time of each; rendering runs ahead in its own thread and the chunks are exposed
@@ -138,6 +141,7 @@ class PassResult:
     setup: RenderSetup
     timings_s: dict[str, float] = field(default_factory=dict)
     make_dataset: Callable[[], xr.Dataset] | None = field(default=None, repr=False)
+    truth: bool = False
 
     @functools.cached_property
     def dataset(self) -> xr.Dataset:
@@ -350,7 +354,7 @@ def run_pass(
             ds.attrs.update(mu1=int(mu1), mu2=int(mu2))
         return ds
 
-    return PassResult(dn, setup, timings, make_dataset)
+    return PassResult(dn, setup, timings, make_dataset, truth=truth)
 
 
 def simulate(

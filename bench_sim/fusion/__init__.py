@@ -8,24 +8,20 @@
 """
 
 from bench_sim.fusion.classic import merge_debevec_opencv, merge_mertens_opencv
-from bench_sim.fusion.common import FusionResult, clip_value_dn, full_scale_dn
+from bench_sim.fusion.common import FusionResult
 from bench_sim.fusion.multistage import (
     fuse_stages_highest_unsaturated,
     fuse_stages_inverse_variance,
-    stage_read_variance_dn2,
 )
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
 from bench_sim.fusion.tonemap import TRA_METHODS, gamma_tra, quantize_display, tone_map
 
 __all__ = [
     "FusionResult",
-    "full_scale_dn",
-    "clip_value_dn",
     "eq11_threshold_dn",
     "fuse_dtdi_hdr_eq11",
     "fuse_stages_highest_unsaturated",
     "fuse_stages_inverse_variance",
-    "stage_read_variance_dn2",
     "merge_debevec_opencv",
     "merge_mertens_opencv",
     "TRA_METHODS",

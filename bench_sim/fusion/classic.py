@@ -18,6 +18,15 @@ the functions fall back to 8-bit there):
   the clip value is the hat weight's zero; at most 16 bits of each input are resolved.
 * Mertens: float32 ``255 * gamma / (2**beta - 1)`` (its weights assume 8-bit scaling), no
   rounding.
+
+References
+----------
+.. [Debevec] P. E. Debevec and J. Malik, Recovering high dynamic range radiance maps from
+   photographs, Proc. SIGGRAPH 1997, 369-378.
+.. [Mertens] T. Mertens, J. Kautz and F. Van Reeth, Exposure fusion, Proc. Pacific Graphics 2007,
+   382-390 (extended: Computer Graphics Forum 28(1), 2009, 161-171).
+.. [DTDI] *An HDR Imaging Method With DTDI Technology for Push-Broom Cameras* (the paper
+   bench_sim reproduces), eq. 13 (stage images as exposures ``m E_basic``).
 """
 
 from __future__ import annotations
@@ -27,7 +36,8 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bench_sim.fusion.common import as_stage_stack, clip_value_dn
+from bench_sim.fusion.common import as_stage_stack
+from bench_sim.sensor.model import word_clip_dn
 
 __all__ = ["merge_debevec_opencv", "merge_mertens_opencv"]
 
@@ -35,7 +45,7 @@ _CV16 = 65535.0
 
 
 def _normalised(stack: NDArray[np.float64], beta: int) -> NDArray[np.float64]:
-    return np.clip(stack / clip_value_dn(beta), 0.0, 1.0)
+    return np.clip(stack / float(word_clip_dn(beta, "beta")), 0.0, 1.0)
 
 
 def merge_debevec_opencv(stages: Mapping[int, ArrayLike], *, beta: int) -> NDArray[np.float64]:
@@ -70,7 +80,7 @@ def merge_debevec_opencv(stages: Mapping[int, ArrayLike], *, beta: int) -> NDArr
         per_stage = rad.astype(np.float64) / 255.0
     if per_stage.ndim == 3:
         per_stage = per_stage[..., 0]
-    return per_stage * clip_value_dn(beta) * ms[-1]
+    return per_stage * float(word_clip_dn(beta, "beta")) * ms[-1]
 
 
 def merge_mertens_opencv(

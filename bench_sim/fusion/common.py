@@ -2,8 +2,10 @@
 
 Every fusion function takes *stage images*: 2-D arrays of digital numbers (DN) in stage units, i.e.
 the DTDI sum of ``m`` pixel reads, black offset subtracted, clipped to the ``beta``-bit output word
-``0 .. 2**beta - 1`` (paper eq. 1-4). Values may be integers or floats (averaged images are fine);
-file-level checks (integer values, range) live in :mod:`bench_sim.experiments.fuse_files`.
+``0 .. 2**beta - 1`` (paper eq. 1-4; ``Phi_FS`` and the word's clip value come from
+:mod:`bench_sim.sensor.model`, the one place ``beta`` is validated). Values may be integers or
+floats (averaged images are fine); file-level checks (integer values, range) live in
+:mod:`bench_sim.experiments.fuse_files`.
 """
 
 from __future__ import annotations
@@ -14,19 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bench_sim.config import BETA_BITS_MAX as BETA_MAX
-from bench_sim.config import BETA_BITS_MIN as BETA_MIN
 from bench_sim.errors import BenchSimError
-from bench_sim.sensor.model import check_beta_bits
-from bench_sim.sensor.model import full_scale_dn as _word_full_scale_dn
 
 __all__ = [
     "FusionResult",
-    "BETA_MIN",
-    "BETA_MAX",
-    "full_scale_dn",
-    "clip_value_dn",
-    "check_beta",
     "check_stage_pair",
     "as_stage_image",
     "as_stage_stack",
@@ -62,23 +55,6 @@ class FusionResult:
     full_scale_dn: float
     saturated: NDArray[np.bool_]
     variance: NDArray[np.float64] | None = None
-
-
-def check_beta(beta: int) -> int:
-    """Validate the output word length ``beta`` [bits] (``BETA_MIN .. BETA_MAX``); the one
-    validator, :func:`bench_sim.sensor.model.check_beta_bits`."""
-    return check_beta_bits(beta, "beta")
-
-
-def full_scale_dn(beta: int) -> int:
-    """``Phi_FS = 2**beta`` [DN] (paper eq. 4) of :func:`bench_sim.sensor.model.full_scale_dn`,
-    with ``beta`` validated under the fusion's name for it."""
-    return _word_full_scale_dn(check_beta(beta))
-
-
-def clip_value_dn(beta: int) -> float:
-    """Largest storable value of a ``beta``-bit word, ``2**beta - 1`` [DN]."""
-    return float(full_scale_dn(beta) - 1)
 
 
 def check_stage_pair(mu1: int, mu2: int) -> tuple[int, int]:

@@ -44,18 +44,12 @@ from bench_sim.errors import BenchSimError
 from bench_sim.fusion.common import (
     FusionResult,
     as_stage_stack,
-    clip_value_dn,
-    full_scale_dn,
 )
-from bench_sim.sensor.model import stage_variance_dn2
-
-#: The stage variance of :func:`bench_sim.sensor.model.stage_variance_dn2` (one closed form).
-stage_read_variance_dn2 = stage_variance_dn2
+from bench_sim.sensor.model import full_scale_dn, stage_variance_dn2, word_clip_dn
 
 __all__ = [
     "fuse_stages_highest_unsaturated",
     "fuse_stages_inverse_variance",
-    "stage_read_variance_dn2",
     "saturation_levels_dn",
 ]
 
@@ -76,7 +70,7 @@ def saturation_levels_dn(
         use the word clip). Use e.g. ``min(2**beta - 1, m * pixel_saturation_dn)`` when pixels
         saturate before the output word does.
     """
-    clip = clip_value_dn(beta)
+    clip = float(word_clip_dn(beta, "beta"))
     if saturation_dn is None:
         return np.full(len(stages), clip)
     if isinstance(saturation_dn, Mapping):
@@ -116,7 +110,7 @@ def fuse_stages_highest_unsaturated(
         saturation level; ``full_scale_dn = (2**beta - 1) * m_K / m_1``.
     """
     ms, stack = as_stage_stack(stages)
-    phi_fs = full_scale_dn(beta)
+    phi_fs = full_scale_dn(beta, "beta")
     sat = saturation_levels_dn(ms, beta, saturation_dn)
     n = len(ms)
     if criterion == "predicted":
@@ -137,7 +131,7 @@ def fuse_stages_highest_unsaturated(
         hdr=hdr,
         source=np.asarray(ms, dtype=np.int32)[k_sel],
         unit_stage=ms[-1],
-        full_scale_dn=clip_value_dn(beta) * ms[-1] / ms[0],
+        full_scale_dn=float(word_clip_dn(beta, "beta")) * ms[-1] / ms[0],
         saturated=stack[0] >= sat[0],
     )
 
@@ -224,7 +218,7 @@ def fuse_stages_inverse_variance(
         hdr=hdr,
         source=np.asarray(ms, dtype=np.int32)[k_hi],
         unit_stage=top,
-        full_scale_dn=clip_value_dn(beta) * top / ms[0],
+        full_scale_dn=float(word_clip_dn(beta, "beta")) * top / ms[0],
         saturated=~any_unsat,
         variance=variance,
     )

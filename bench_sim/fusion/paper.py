@@ -34,9 +34,8 @@ from bench_sim.fusion.common import (
     FusionResult,
     as_stage_image,
     check_stage_pair,
-    clip_value_dn,
-    full_scale_dn,
 )
+from bench_sim.sensor.model import full_scale_dn, word_clip_dn
 
 __all__ = ["eq11_threshold_dn", "fuse_dtdi_hdr_eq11"]
 
@@ -60,7 +59,7 @@ def eq11_threshold_dn(mu1: int, mu2: int, beta: int, pedestal_dn: float = 0.0) -
         ``(2**beta - P) * mu1 / mu2`` (e.g. 512 DN for ``mu1 = 10``, ``mu2 = 80``, ``beta = 12``).
     """
     mu1, mu2 = check_stage_pair(mu1, mu2)
-    return (full_scale_dn(beta) - float(pedestal_dn)) * mu1 / mu2
+    return (full_scale_dn(beta, "beta") - float(pedestal_dn)) * mu1 / mu2
 
 
 def fuse_dtdi_hdr_eq11(
@@ -107,12 +106,12 @@ def fuse_dtdi_hdr_eq11(
         Unequal shapes, non-finite values, bad stages or ``beta``.
     """
     mu1, mu2 = check_stage_pair(mu1, mu2)
-    phi_fs = full_scale_dn(beta)
+    phi_fs = full_scale_dn(beta, "beta")
     g1 = as_stage_image(gamma1, "gamma1")
     g2 = as_stage_image(gamma2, "gamma2")
     if g1.shape != g2.shape:
         raise BenchSimError(f"gamma1 shape {g1.shape} differs from gamma2 shape {g2.shape}")
-    clip = clip_value_dn(beta)
+    clip = float(word_clip_dn(beta, "beta"))
     p1, p2 = (
         (float(pedestal_dn), float(pedestal_dn))
         if np.ndim(pedestal_dn) == 0

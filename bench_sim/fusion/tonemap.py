@@ -22,6 +22,19 @@ else ``max(x)``), ``y`` the display value in ``0 .. 1``:
 
 The display image is ``round(y * (2**bits - 1))`` as ``uint8`` (``bits = 8``) or ``uint16``
 (``bits = 16``).
+
+References
+----------
+.. [DTDI] *An HDR Imaging Method With DTDI Technology for Push-Broom Cameras* (the paper
+   bench_sim reproduces), section 2.2 and Fig. 4(b) (``Gamma_TRA``).
+.. [Reinhard] E. Reinhard and K. Devlin, Dynamic range reduction inspired by photoreceptor
+   physiology, IEEE Trans. Visualization and Computer Graphics 11(1), 2005, 13-24.
+.. [Drago] F. Drago, K. Myszkowski, T. Annen and N. Chiba, Adaptive logarithmic mapping for
+   displaying high contrast scenes, Computer Graphics Forum 22(3), 2003, 419-426.
+.. [Mantiuk] R. Mantiuk, K. Myszkowski and H.-P. Seidel, A perceptual framework for contrast
+   processing of high dynamic range images, ACM Trans. Applied Perception 3(3), 2006, 286-308.
+.. [Gonzalez] R. C. Gonzalez and R. E. Woods, Digital Image Processing, 4th ed., Pearson, 2018,
+   section 3.3 (histogram equalisation).
 """
 
 from __future__ import annotations

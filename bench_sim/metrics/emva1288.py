@@ -27,6 +27,13 @@ Definitions follow EMVA 1288 Release 4.0 (linear cameras):
 serves any image type: a DTDI stage, or a fused HDR image whose gain is not a single ``K``.
 The saturation point is located between the levels (parabolic refinement of the variance
 maximum) so that dynamic ranges can be compared to a few tenths of a dB even on a coarse grid.
+
+References
+----------
+.. [EMVA] EMVA Standard 1288, Release 4.0 Linear: Standard for Characterization of Image
+   Sensors and Cameras, European Machine Vision Association, 2021:
+   sections 2 (linear model, eq. 1-8), 3 (photon
+   transfer, saturation, sensitivity threshold, dynamic range) and 4 (spatial non-uniformity).
 """
 
 from __future__ import annotations

@@ -26,6 +26,11 @@ value, see :class:`Binning`):
 
 Hand example: the 2 x 2 image ``[[0, 0], [1, 3]]`` with ``beta = 2`` has counts ``[2, 1, 0, 1]``,
 mean 1, population variance ``(1 + 0 + 1 + 0) / 4 = 0.5`` and ``omega = 0.5 / 4 = 0.125``.
+
+References
+----------
+.. [DTDI] *An HDR Imaging Method With DTDI Technology for Push-Broom Cameras* (the paper
+   bench_sim reproduces), eq. 16-18 and Table 1.
 """
 
 from __future__ import annotations

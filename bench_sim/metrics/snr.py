@@ -10,6 +10,13 @@ R4; :func:`bench_sim.metrics.emva1288.mean_var_from_pair`)::
 These helpers apply the definitions of :mod:`bench_sim.metrics.emva1288` to any image type
 (stage images, the fused ``Gamma_HDR``): per level of a series (:func:`snr_versus_signal`), or
 per uniform patch of one image pair, e.g. the step-wedge fields of the target (:func:`patch_snr`).
+
+References
+----------
+.. [EMVA] EMVA Standard 1288, Release 4.0 Linear: Standard for Characterization of Image
+   Sensors and Cameras, European Machine Vision Association, 2021,
+   section 3 (temporal noise from image pairs, SNR
+   curve).
 """
 
 from __future__ import annotations

@@ -47,8 +47,24 @@ from bench_sim.rig.scene import light_names, scene_dict
 __all__ = ["ReferenceEngine", "FastEngine", "check_fast_engine_valid"]
 
 
+#: The Mitsuba parameter holding each kind of light's emitted quantity (under the light's name).
+_EMISSION_PARAM = {
+    "spot": "intensity",
+    "point": "intensity",
+    "directional": "irradiance",
+    "fill": "radiance",
+    "area": "emitter.radiance",
+}
+
+
 class ReferenceEngine:
-    """Mitsuba renders every frame (see module docstring)."""
+    """Mitsuba renders every frame (see module docstring).
+
+    Lights that flicker are scaled per frame by their weight
+    (:func:`bench_sim.rig.lights.frame_weights`): each one's emission parameter is set to its
+    level times the weight as an *opaque* Dr.Jit value before the frame's render, so, like the
+    frame's start time, it changes no compiled kernel.
+    """
 
     name = "reference"
 
@@ -65,12 +81,35 @@ class ReferenceEngine:
         )
         self.scene = mi.load_dict(d)
         self.renders = 0  # Mitsuba renders made by this engine
+        # flickering lights: parameter key -> its level at weight 1
+        self._params = mi.traverse(self.scene)
+        self._levels: dict[str, tuple[str, np.ndarray]] = {}
+        for name in light_names(cfg):
+            if cfg.lights.get(name).flickers:
+                stem = f"{name}.{_EMISSION_PARAM[cfg.lights.get(name).kind]}"
+                key = next(k for k in (f"{stem}.value", f"{stem}.values") if k in self._params)
+                self._levels[name] = (key, np.array(self._params[key], dtype=np.float64))
+
+    def _set_weights(self, weights: dict[str, float]) -> None:
+        import drjit as dr
+
+        for name, (key, level) in self._levels.items():
+            value, cls = level * weights[name], type(self._params[key])
+            # an array from memory (spectral values) or an opaque scalar: never a literal
+            if value.size > 1:
+                self._params[key] = cls(value.astype(np.float32))
+            else:
+                self._params[key] = dr.opaque(cls, float(value[0]))
+        self._params.update()
 
     def radiance_frames(self, k0: int, k1: int) -> np.ndarray:
         """Radiance [W m^-2 sr^-1], shape (k1 - k0, rows, columns), float32."""
         out = np.empty((k1 - k0, self.cfg.sensor.rows, self.cfg.sensor.columns), dtype=np.float32)
+        weights = {name: frame_weights(self.cfg, name, k0, k1) for name in self._levels}
         for k in range(k0, k1):
             self.texture.set_frame_start(k * self.geom.line_period_s)
+            if weights:
+                self._set_weights({name: float(w[k - k0]) for name, w in weights.items()})
             img = render_array(self.mi, self.scene, self.spp, self.seed * 1_000_003 + k)
             self.renders += 1
             out[k - k0] = img[..., 0]

@@ -2,7 +2,15 @@
 
 Mitsuba's film holds pixel-averaged scene radiance ``L`` [W m^-2 sr^-1] (in-band, mono). Neither
 its ``perspective`` nor its ``thinlens`` camera includes the lens' f-number, transmission or
-the cos^4 off-axis fall-off, so they are applied here (see notes/mitsuba-on-cpu.md).
+the cos^4 off-axis fall-off (a uniformly lit plane renders to the same radiance in the corner as
+in the centre), so they are applied here.
+
+References
+----------
+.. [Slater] P. N. Slater, *Remote Sensing: Optics and Optical Systems*, Addison-Wesley, 1980
+   (camera equation: image irradiance of an extended Lambertian scene, cos^4 law).
+.. [Born] M. Born and E. Wolf, *Principles of Optics*, 7th ed., Cambridge University Press, 1999,
+   section 8.5.2 (Airy pattern and its encircled energy).
 """
 
 from __future__ import annotations
@@ -10,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import constants
 
 __all__ = [
     "PLANCK_J_S",
@@ -23,8 +32,9 @@ __all__ = [
     "apply_psf",
 ]
 
-PLANCK_J_S = 6.62607015e-34
-SPEED_OF_LIGHT_M_S = 299_792_458.0
+#: Planck constant [J s] and speed of light in vacuum [m/s] (CODATA, exact in SI)
+PLANCK_J_S: float = constants.h
+SPEED_OF_LIGHT_M_S: float = constants.c
 
 
 def photon_energy_j(wavelength_m: float) -> float:

@@ -49,6 +49,11 @@ are the same for every line, so they add coherently (the column offset as ``m`` 
 
 Memory: :class:`DTDIAccumulator` keeps a ring of ``max(stages)`` partial line sums of ``N``
 columns, ``O(M * N)``, independent of the number of lines.
+
+References
+----------
+.. [DTDI] *An HDR Imaging Method With DTDI Technology for Push-Broom Cameras* (the paper
+   bench_sim reproduces), eq. 1-4 (DTDI sums and the output word ``Phi_FS = 2**beta``).
 """
 
 from __future__ import annotations

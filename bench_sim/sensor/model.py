@@ -78,14 +78,15 @@ def check_beta_bits(beta_bits: int, name: str = "beta_bits") -> int:
     return int(beta_bits)
 
 
-def full_scale_dn(beta_bits: int) -> int:
-    """``Phi_FS = 2**beta`` [DN] (paper eq. 4); the largest stored value is ``Phi_FS - 1``."""
-    return 1 << check_beta_bits(beta_bits)
+def full_scale_dn(beta_bits: int, name: str = "beta_bits") -> int:
+    """``Phi_FS = 2**beta`` [DN] (paper eq. 4); the largest stored value is ``Phi_FS - 1``.
+    ``beta_bits`` is validated by :func:`check_beta_bits` (errors name ``name``)."""
+    return 1 << check_beta_bits(beta_bits, name)
 
 
-def word_clip_dn(beta_bits: int) -> int:
+def word_clip_dn(beta_bits: int, name: str = "beta_bits") -> int:
     """Largest value a ``beta``-bit stage word stores: ``2**beta - 1`` [DN]."""
-    return full_scale_dn(beta_bits) - 1
+    return full_scale_dn(beta_bits, name) - 1
 
 
 def word_dtype(beta_bits: int) -> np.dtype:
