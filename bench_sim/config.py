@@ -6,19 +6,24 @@ Unknown keys are rejected. A TOML file may name a ``base`` file (relative to its
 values it overrides, which is how the lighting presets in ``scenes/`` are built.
 
 Errors are raised as :class:`ConfigError` with one line naming the file, the key, the value and
-what is allowed.
+what is allowed. Every float of every section must be finite (``inf``/``nan`` are refused by the
+base section model, so sections added later are covered too); combinations the physics cannot
+mean are refused (:meth:`BenchConfig._cross`), and odd-but-legal ones are reported by
+:func:`config_warnings` (issued as :class:`~bench_sim.errors.ConfigWarning` when a config is
+loaded), with the numbers.
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
+import warnings
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from bench_sim.errors import BenchSimError
+from bench_sim.errors import BenchSimError, ConfigWarning
 
 __all__ = [
     "ConfigError",
@@ -45,6 +50,7 @@ __all__ = [
     "config_to_toml_dict",
     "config_sha256",
     "config_to_toml_text",
+    "config_warnings",
 ]
 
 #: The scenes shipped inside the package (``scenes/`` in a source checkout links here).
@@ -76,7 +82,10 @@ class ConfigError(BenchSimError):
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    """Base of every config section: unknown keys refused, immutable, and every float finite
+    (``allow_inf_nan=False`` applies to floats anywhere in a section, in tuples too)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False)
 
 
 class DrumConfig(_Section):
@@ -250,6 +259,11 @@ class SpotLightConfig(_Section):
 
     @model_validator(mode="after")
     def _beam(self) -> SpotLightConfig:
+        if math.dist(self.position_m, self.aim_m) < 1e-6:
+            raise ValueError(
+                f"position_m = {list(self.position_m)} is at aim_m: the spot has no direction; "
+                "place it away from the point it aims at"
+            )
         if self.beam_width_deg > self.cutoff_deg:
             raise ValueError(
                 f"beam_width_deg = {self.beam_width_deg} must not exceed cutoff_deg = "
@@ -314,6 +328,16 @@ class SensorConfig(_Section):
     dsnu_enabled: bool = True
     column_fpn: bool = True
     quantization: bool = True
+
+    @model_validator(mode="after")
+    def _black_below_adc_top(self) -> SensorConfig:
+        top = 2**self.adc_bits - 1
+        if self.black_offset_dn >= top:
+            raise ValueError(
+                f"black_offset_dn = {self.black_offset_dn} is at or above the top of the "
+                f"{self.adc_bits}-bit ADC ({top} DN): no signal could be recorded; it must be below {top}"
+            )
+        return self
 
 
 class TimingConfig(_Section):
@@ -388,6 +412,13 @@ class RenderConfig(_Section):
 
 
     @model_validator(mode="after")
+    def _variant(self) -> RenderConfig:
+        from bench_sim.backend import check_variant_name
+
+        check_variant_name(self.variant, "spectral" if self.spectral else "mono", "variant")
+        return self
+
+    @model_validator(mode="after")
     def _band(self) -> RenderConfig:
         lo, hi = self.band_m
         if not 360e-9 <= lo < hi <= 830e-9:
@@ -460,11 +491,61 @@ class BenchConfig(_Section):
                 raise ValueError("sensor.qe_curve: relative QE values must lie in 0..1")
         if not math.isfinite(self.lens.magnification):
             raise ValueError("lens magnification is not finite")
+        spot = getattr(self.lights, "strong", None)
+        if spot is not None and spot.enabled and math.hypot(spot.position_m[1], spot.position_m[2]) <= (
+            self.drum.radius_m
+        ):
+            raise ValueError(
+                f"lights.strong.position_m = {list(spot.position_m)} lies inside the drum (drum.radius_m "
+                f"= {self.drum.radius_m} around the x axis): it could light nothing; move it outside"
+            )
+        from bench_sim.sensor.model import dark_electrons, pixel_saturation_electrons
+
+        dark_e = dark_electrons(self.sensor, self.timing.t_int_s)
+        clip_e = pixel_saturation_electrons(self.sensor)
+        if dark_e >= clip_e:
+            raise ValueError(
+                f"sensor.dark_current_e_s = {self.sensor.dark_current_e_s} over t_int = "
+                f"{self.timing.t_int_s:g} s gives {dark_e:.4g} dark e- per read, at or above the "
+                f"pixel's clip ({clip_e:.4g} e-: full well or ADC top): every pixel saturates in the "
+                "dark; lower the dark current or the integration time"
+            )
         return self
 
 
+def config_warnings(cfg: BenchConfig) -> list[str]:
+    """Legal but odd settings of ``cfg``, one line each with the numbers (empty if none).
+
+    - ``dtdi.beta_bits`` narrower than one pixel: the word's room above the pedestal,
+      ``2**beta - 1 - P``, is less than what one read adds to a stage sum (``2**adc_bits - 1``,
+      less the black offset when it is subtracted), so even stage 1 clips on the word.
+    """
+    from bench_sim.sensor.model import pixel_saturation_dn, word_clip_dn
+
+    out: list[str] = []
+    s, d = cfg.sensor, cfg.dtdi
+    room = word_clip_dn(d.beta_bits) - d.pedestal_dn
+    read = pixel_saturation_dn(s) - (s.black_offset_dn if d.subtract_black else 0.0)
+    if room < read:
+        out.append(
+            f"dtdi.beta_bits = {d.beta_bits}: the word holds {room:g} DN above the {d.pedestal_dn} DN "
+            f"pedestal, less than one pixel read can add ({read:g} DN: sensor.adc_bits = {s.adc_bits}"
+            f"{', black subtracted' if d.subtract_black else ''}): every stage clips on the word at "
+            f"{100 * room / read:.0f} % of one pixel's range or less; widen beta_bits to at least "
+            f"{math.ceil(math.log2(read + d.pedestal_dn + 1))}"
+        )
+    return out
+
+
 def _format_loc(loc: tuple[int | str, ...]) -> str:
-    return ".".join(str(p) for p in loc if not (isinstance(p, str) and p.startswith("function-")))
+    """``('lights', 'strong', 'position_m', 0)`` -> ``lights.strong.position_m[0]``."""
+    out = ""
+    for p in loc:
+        if isinstance(p, int):
+            out += f"[{p}]"
+        elif not p.startswith("function-"):
+            out += f".{p}" if out else p
+    return out
 
 
 def _lookup(data: Any, loc: tuple[int | str, ...]) -> Any:
@@ -489,10 +570,14 @@ def _validation_message(exc: ValidationError, data: dict[str, Any], source: str)
     value = err.get("input") if loc else None
     if loc and value is None:
         value = _lookup(data, loc)
+    msg = " ".join(msg.removeprefix("Value error, ").split())
     if isinstance(value, dict) or not loc:
         where = f"{key}: " if loc else ""
-        return f"config error: {source}: {where}{msg.removeprefix('Value error, ')}"
-    return f"config error: {source}: {key} = {value!r}: {msg.removeprefix('Value error, ')}"
+        return f"config error: {source}: {where}{msg}"
+    shown = repr(value)
+    if len(shown) > 60:
+        shown = shown[:40] + "..." + shown[-12:]
+    return f"config error: {source}: {key} = {shown}: {msg}"
 
 
 def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -506,14 +591,29 @@ def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 
 def _read_toml(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
+    if path.is_dir():
+        raise ConfigError(f"config error: {path}: is a folder, not a TOML file")
     if not path.is_file():
         raise ConfigError(f"config error: {path}: no such file")
     if path in chain:
         raise ConfigError(f"config error: {path}: 'base' chain loops back to itself")
     try:
-        data = tomllib.loads(path.read_text())
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"config error: {path}: cannot read it ({exc.strerror})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"config error: {path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
+            "a config is a TOML text file in UTF-8"
+        ) from None
+    if "\x00" in text:
+        raise ConfigError(f"config error: {path}: holds NUL bytes (a binary file?); a config is TOML text")
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"config error: {path}: not valid TOML ({exc})") from exc
+        raise ConfigError(f"config error: {path}: not valid TOML ({' '.join(str(exc).split())})") from None
     image = data.get("target", {}).get("image") if isinstance(data.get("target"), dict) else None
     if isinstance(image, str) and image and not Path(image).is_absolute():
         data["target"]["image"] = str((path.parent / image).resolve())  # relative to this file
@@ -527,11 +627,19 @@ def _read_toml(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
 
 
 def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> BenchConfig:
-    """Validate a plain dict (as parsed from TOML) into a :class:`BenchConfig`."""
+    """Validate a plain dict (as parsed from TOML) into a :class:`BenchConfig`.
+
+    Each line of :func:`config_warnings` is issued as a :class:`~bench_sim.errors.ConfigWarning`.
+    """
+    if not isinstance(data, dict):
+        raise ConfigError(f"config error: {source}: expected a table of settings, got {type(data).__name__}")
     try:
-        return BenchConfig.model_validate(data)
+        cfg = BenchConfig.model_validate(data)
     except ValidationError as exc:
         raise ConfigError(_validation_message(exc, data, source)) from None
+    for line in config_warnings(cfg):
+        warnings.warn(f"{source}: {line}", ConfigWarning, stacklevel=2)
+    return cfg
 
 
 def load_config(path: str | Path | None = None) -> BenchConfig:

@@ -48,3 +48,34 @@ def test_base_chain_overrides(tmp_path):
     (tmp_path / "b.toml").write_text("base = 'a.toml'\n[dtdi]\nbeta_bits = 16\n")
     cfg = load_config(tmp_path / "b.toml")
     assert (cfg.sensor.rows, cfg.dtdi.beta_bits, cfg.sensor.columns) == (90, 16, 1024)
+
+
+@pytest.mark.parametrize(
+    ("dtdi", "warns"),
+    [
+        ({"beta_bits": 12}, False),  # the paper: 4031 DN of room, one read adds up to 1003 DN
+        ({"beta_bits": 11}, False),  # 1983 DN of room
+        ({"beta_bits": 10}, True),  # 959 DN of room above the 64 DN pedestal: less than one read
+        ({"beta_bits": 10, "pedestal_dn": 0}, False),  # 1023 DN
+        ({"beta_bits": 10, "pedestal_dn": 0, "subtract_black": False}, False),  # a read adds 1023 DN
+        ({"beta_bits": 10, "pedestal_dn": 1, "subtract_black": False}, True),
+        ({"beta_bits": 8}, True),
+    ],
+)
+def test_a_word_narrower_than_one_pixel_is_warned_about_with_the_numbers(dtdi, warns):
+    import warnings
+
+    from bench_sim.config import config_warnings, with_overrides
+    from bench_sim.errors import ConfigWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cfg = with_overrides(load_config(), {"dtdi": dtdi})
+    lines = config_warnings(cfg)
+    assert len(lines) == int(warns)
+    issued = [str(w.message) for w in caught if w.category is ConfigWarning]
+    assert issued == [f"<overrides>: {ln}" for ln in lines]
+    if warns:
+        room = 2 ** dtdi["beta_bits"] - 1 - dtdi.get("pedestal_dn", 64)
+        assert f"beta_bits = {dtdi['beta_bits']}: the word holds {room} DN" in lines[0]
+        assert "widen beta_bits to at least" in lines[0] and "\n" not in lines[0]
