@@ -280,13 +280,15 @@ def mitsuba_variants() -> tuple[str, ...]:
     """The variants the installed Mitsuba was built with, read from its ``config.py`` without
     importing Mitsuba (``()`` if Mitsuba is not installed)."""
     import ast
-    import importlib.util
+    from importlib.metadata import files
 
-    spec = importlib.util.find_spec("mitsuba")
-    if spec is None or not spec.submodule_search_locations:
+    try:  # the installed files (an imported Mitsuba replaces its own module spec)
+        paths = [Path(str(f.locate())) for f in files("mitsuba") or () if f.name == "config.py"]
+    except PackageNotFoundError:
         return ()
-    for folder in spec.submodule_search_locations:
-        path = Path(folder) / "config.py"
+    for path in paths:
+        if path.parent.name != "mitsuba":
+            continue
         try:
             tree = ast.parse(path.read_text())
         except (OSError, SyntaxError, ValueError):
