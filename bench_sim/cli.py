@@ -76,15 +76,10 @@ def _one_line_warnings() -> Iterator[None]:
             prefix = "" if issubclass(category, UserWarning) else f"{category.__name__}: "
             _say("warning", prefix + text)
 
-    old = warnings.showwarning
-    warnings.showwarning = show
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("default")
-            warnings.showwarning = show
-            yield
-    finally:
-        warnings.showwarning = old
+    with warnings.catch_warnings():  # restores the filters and showwarning on the way out
+        warnings.simplefilter("default")
+        warnings.showwarning = show
+        yield
 
 
 @contextlib.contextmanager
@@ -129,6 +124,10 @@ def guarded(func: Callable[[], T]) -> T:
             traceback.print_exc()
         _say("error", f"out of memory ({exc or 'MemoryError'}); lower lines, sensor.columns or --frames")
         raise typer.Exit(EXIT_USER) from None
+    except BrokenPipeError:  # the reader went away (``| head``): nothing to say to it
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        raise typer.Exit(EXIT_BUG) from None
     except OSError as exc:  # the environment: a file that cannot be read or written
         if _debug():
             traceback.print_exc()
@@ -136,6 +135,10 @@ def guarded(func: Callable[[], T]) -> T:
         _say("error", f"{where}{exc.strerror or exc}")
         raise typer.Exit(EXIT_USER) from None
     except Exception as exc:
+        cause = _interruption(exc)
+        if cause is not None:  # Ctrl-C inside a C extension (an import), re-raised wrapped
+            _say(*cause)
+            raise typer.Exit(EXIT_INTERRUPT if cause[0] == "interrupted" else EXIT_TERM) from None
         if _debug():
             raise
         first = " ".join(str(exc).split())[:300]
@@ -147,6 +150,22 @@ def guarded(func: Callable[[], T]) -> T:
 
 
 _NOTHING_LEFT = "no partial output was left (an earlier complete output is kept)"
+
+
+def _interruption(exc: BaseException) -> tuple[str, str] | None:
+    """The interruption (Ctrl-C, SIGTERM) an exception was raised from, if any, as the line to
+    print: a signal that arrives while C code runs (an import) can come back wrapped, e.g. as
+    ``SystemError: ... returned a result with an exception set``."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        seen.add(id(cur))
+        if isinstance(cur, KeyboardInterrupt):
+            return "interrupted", f"stopped by Ctrl-C; {_NOTHING_LEFT}"
+        if isinstance(cur, _Terminated):
+            return "terminated", f"stopped by SIGTERM; {_NOTHING_LEFT}"
+        cur = cur.__cause__ or cur.__context__
+    return None
 
 
 def _given(exc: Exception, args: Any) -> str:
@@ -167,8 +186,9 @@ def _given(exc: Exception, args: Any) -> str:
 class _BenchSimGroup(TyperGroup):
     """The command group: every sub-command runs :func:`guarded`; usage errors are one line."""
 
-    def invoke(self, ctx: Any) -> Any:
-        return guarded(lambda: super(_BenchSimGroup, self).invoke(ctx))
+    def invoke(self, ctx: Any) -> None:
+        # a command's return value is not an exit status (as in click's standalone mode)
+        guarded(lambda: super(_BenchSimGroup, self).invoke(ctx))
 
     def main(self, args: Any = None, prog_name: Any = None, complete_var: Any = None,
              standalone_mode: bool = True, **extra: Any) -> Any:
@@ -192,7 +212,7 @@ class _BenchSimGroup(TyperGroup):
         except KeyboardInterrupt:  # Ctrl-C while parsing, before a command runs
             _say("interrupted", "stopped by Ctrl-C; nothing was written")
             sys.exit(EXIT_INTERRUPT)
-        sys.exit(rv if isinstance(rv, int) else 0)
+        sys.exit(rv if isinstance(rv, int) else 0)  # an int here is typer.Exit's status
 
 
 app = typer.Typer(
@@ -356,7 +376,7 @@ def simulate(
 
 
 def main() -> None:  # pragma: no cover
-    """Entry point of the ``bench-sim`` script."""
+    """Run the command line (the ``bench-sim`` script is :func:`bench_sim.__main__.main`)."""
     app()
 
 

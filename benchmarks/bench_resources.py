@@ -32,7 +32,7 @@ from bench_sim.resources import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-CLI = [sys.executable, "-c", "from bench_sim.cli import main; main()"]
+CLI = [sys.executable, "-m", "bench_sim"]
 
 
 def _run(args: list[str], out: Path) -> tuple[int, int, float]:

@@ -528,3 +528,21 @@ def test_odd_but_legal_configs_warn_with_numbers_and_run(tmp_path: Path) -> None
     assert len(warn) == 1 and "beta_bits = 8" in warn[0] and "191 DN" in warn[0] and "1003 DN" in warn[0]
     assert (tmp_path / "out" / "exposures.exr").is_file()
 
+
+
+def test_ctrl_c_inside_c_code_is_an_interruption(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C while a C extension imports comes back as ``SystemError`` from the
+    ``KeyboardInterrupt``: still one line and exit status 130."""
+    import bench_sim.experiments.render_job as job
+
+    def interrupted(*args: Any, **kwargs: Any) -> None:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            msg = "<built-in function __import__> returned a result with an exception set"
+            raise SystemError(msg) from exc
+
+    monkeypatch.setattr(job, "run_render", interrupted)
+    r = runner.invoke(app, ["render", str(_inputs(tmp_path)), "--out", str(tmp_path / "out")])
+    assert r.exit_code == 130 and r.stderr.count("\n") == 1
+    assert r.stderr.startswith("bench-sim: interrupted: ")
