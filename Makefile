@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup reproduce test lint bench clean
+.PHONY: setup reproduce test install-check lint bench clean
 
 .setup-stamp: pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -17,6 +17,11 @@ reproduce: setup
 test: setup
 	$(VENV)/bin/ruff check bench_sim tests benchmarks
 	$(PY) -m pytest
+	bash scripts/check_install.sh
+
+# `pip install .` into a fresh venv, then `bench-sim reproduce --quick` from another folder
+install-check:
+	bash scripts/check_install.sh
 
 bench: setup
 	$(PY) benchmarks/bench_render.py

@@ -269,7 +269,8 @@ def doctor() -> None:
 
     A variant forced by ``BENCH_SIM_VARIANT`` that cannot run here is one line, exit status 2."""
     from bench_sim.backend import choose_backend, versions
-    from bench_sim.resources import available_memory_bytes, format_bytes
+    from bench_sim.io import format_bytes
+    from bench_sim.resources import available_memory_bytes
 
     choice = choose_backend()
     print(f"variant     : {choice.variant} ({choice.kind})")
@@ -373,6 +374,40 @@ def simulate(
     from bench_sim.experiments.simulate import run_simulate
 
     run_simulate(config, stages=stages, seed=seed, out=out, fmt=fmt)
+
+
+@app.command()
+@_user_errors
+def dataset(
+    spec: Annotated[Path, typer.Argument(help="dataset spec (TOML), e.g. scenes/datasets/example.toml")],
+    out: Annotated[Path, typer.Option("--out", help="dataset folder")],
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", help="worker processes of a local Dask cluster (default: the cores; "
+                     "0: this process)"),
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option("--scheduler", help="address of a running Dask scheduler (tcp://HOST:PORT)")
+    ] = None,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="complete a stopped run: skip complete samples, redo the rest")
+    ] = False,
+    only: Annotated[
+        list[int] | None, typer.Option("--only", help="make just sample I (repeatable), identically")
+    ] = None,
+) -> None:
+    """Synthetic validation dataset: many samples with exact ground truth, sharded per sample in
+    DIR/data.zarr, a manifest, a dataset card; resumable, on Dask."""
+    from bench_sim.experiments.dataset import main_summary, run_dataset
+
+    command = f"bench-sim dataset {spec} --out {out}"  # what remakes it (workers change nothing)
+    run = run_dataset(
+        spec, out, workers=workers, scheduler=scheduler, resume=resume, only=only,
+        progress=sys.stderr.isatty(), command=command,
+    )
+    print(main_summary(run))
+    if run.failed:
+        raise typer.Exit(1)
 
 
 def main() -> None:  # pragma: no cover

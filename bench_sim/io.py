@@ -62,6 +62,8 @@ __all__ = [
     "output_files",
     "check_output_dir",
     "check_output_file",
+    "check_free_space",
+    "format_bytes",
     "read_output_record",
     "write_failure",
     "OutputWriteError",
@@ -529,6 +531,41 @@ def _deferred_path(path: Path) -> Iterator[tuple[Path, Any]]:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
         os.close(fd)
+
+
+def format_bytes(n: float) -> str:
+    """``n`` bytes for a message: ``'512 B'``, ``'3.4 MiB'``, ``'2.1 TiB'`` (binary prefixes)."""
+    n = float(n)
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} EiB"  # pragma: no cover - unreachable
+
+
+def check_free_space(
+    out: str | os.PathLike[str], needed_bytes: int, what: str = "--out", detail: str = ""
+) -> int:
+    """Refuse, before any computation, an output that would not fit on its file system.
+
+    ``needed_bytes`` is the caller's estimate of what it will write under ``out`` (an upper
+    bound: e.g. uncompressed array sizes). Raises :class:`BenchSimError` (one line) when it
+    exceeds the free space of the file system holding ``out`` (or its nearest existing parent);
+    returns the free bytes otherwise. ``detail`` (e.g. ``"16 samples x 3.5 MiB"``) is shown in
+    the message.
+    """
+    out = Path(out).expanduser().resolve()
+    anc = out
+    while not anc.exists():
+        anc = anc.parent
+    free = shutil.disk_usage(anc).free
+    if needed_bytes > free:
+        how = f" ({detail})" if detail else ""
+        raise BenchSimError(
+            f"{what} = {str(out)!r}: needs about {format_bytes(needed_bytes)}{how} but its file system "
+            f"has {format_bytes(free)} free: free space, choose another disk or make less"
+        )
+    return int(free)
 
 
 def sha256_text(text: str) -> str:

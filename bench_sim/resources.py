@@ -11,8 +11,9 @@ upper bounds within a factor of about two, so a run that is refused would not ha
 
 Available memory is the smallest of ``MemAvailable`` (``/proc/meminfo``), the cgroup limit less
 its usage (containers, batch jobs) and ``RLIMIT_AS`` less the process's size; available disk is
-the free space of the file system that receives the output (the temporary folder of an output
-set lies beside it, so the new set must fit next to the old one).
+the free space of the file system that receives the output (:func:`bench_sim.io.check_free_space`;
+the temporary folder of an output set lies beside it, so the new set must fit next to the old
+one).
 
 Other commands (sweeps, data sets) build an estimate from :func:`pass_memory` per task times the
 tasks that run at once, and :func:`output_disk` terms times the tasks written, then call
@@ -24,13 +25,13 @@ from __future__ import annotations
 import math
 import os
 import resource
-import shutil
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bench_sim.errors import BenchSimError
+from bench_sim.io import check_free_space, format_bytes
 
 if TYPE_CHECKING:
     from bench_sim.config import BenchConfig
@@ -38,9 +39,7 @@ if TYPE_CHECKING:
 __all__ = [
     "ResourceEstimate",
     "ResourceError",
-    "format_bytes",
     "available_memory_bytes",
-    "available_disk_bytes",
     "check_resources",
     "pass_memory",
     "target_memory",
@@ -74,16 +73,6 @@ TRUTH_BYTES_PER_PIXEL = 8 + 8 + 4 + 1
 
 class ResourceError(BenchSimError):
     """A run that would not fit in the memory or on the disk available (one line)."""
-
-
-def format_bytes(n: float) -> str:
-    """``1.93 TiB``, ``12.0 MiB``, ``512 B``: binary units, three significant digits."""
-    n = float(n)
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if abs(n) < 1024 or unit == "PiB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.3g} {unit}"
-        n /= 1024
-    return f"{n:.3g} PiB"  # pragma: no cover
 
 
 @dataclass(frozen=True)
@@ -179,20 +168,12 @@ def available_memory_bytes() -> tuple[int, str] | None:
     return min(found) if found else None
 
 
-def available_disk_bytes(path: str | os.PathLike[str]) -> int | None:
-    """Free bytes on the file system that holds ``path`` (or its nearest existing ancestor)."""
-    p = Path(path).expanduser().absolute()
-    while not p.exists() and p != p.parent:
-        p = p.parent
-    try:
-        return int(shutil.disk_usage(p).free)
-    except OSError:
-        return None
-
-
-def check_resources(est: ResourceEstimate, out: str | os.PathLike[str] | None = None) -> None:
+def check_resources(
+    est: ResourceEstimate, out: str | os.PathLike[str] | None = None, what: str = "--out"
+) -> None:
     """Refuse a run that cannot fit: one line with the estimate, its largest term, what is
-    available and :attr:`ResourceEstimate.hint`. ``out``: where the outputs go (disk check)."""
+    available and :attr:`ResourceEstimate.hint`. ``out``: where the outputs go (the disk check,
+    :func:`bench_sim.io.check_free_space`)."""
     mem = available_memory_bytes()
     if mem is not None and est.memory_total > mem[0]:
         name, size = est.largest("memory")
@@ -202,14 +183,9 @@ def check_resources(est: ResourceEstimate, out: str | os.PathLike[str] | None = 
             f"({mem[1]}); {est.hint}"
         )
     if out is not None and est.disk_bytes:
-        free = available_disk_bytes(out)
-        if free is not None and est.disk_total > free:
-            name, size = est.largest("disk")
-            raise ResourceError(
-                f"not enough disk space: {est.command} writes about {format_bytes(est.disk_total)} "
-                f"(largest: {name}, {format_bytes(size)}) but {format_bytes(free)} is free for "
-                f"{Path(out)}; free some space, choose another --out, or {est.hint.removeprefix('lower ')}"
-            )
+        name, size = est.largest("disk")
+        detail = f"{est.command}'s output, largest: {name}, {format_bytes(size)}; or {est.hint}"
+        check_free_space(out, est.disk_total, what, detail)
 
 
 # --- terms ---------------------------------------------------------------------------------------

@@ -22,13 +22,13 @@ import numpy as np
 from bench_sim.config import DEFAULT_CONFIG_PATH, load_config
 from bench_sim.experiments.ptc import plan_ptc
 from bench_sim.experiments.reproduce import FIG3_STAGES, quick_config
+from bench_sim.io import format_bytes
 from bench_sim.resources import (
     estimate_fuse,
     estimate_ptc,
     estimate_render,
     estimate_reproduce,
     estimate_simulate,
-    format_bytes,
 )
 
 ROOT = Path(__file__).resolve().parents[1]

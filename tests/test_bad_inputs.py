@@ -10,6 +10,7 @@ starting ``bench-sim: error:`` that names the key, file or option, and no file l
 from __future__ import annotations
 
 import math
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -388,15 +389,18 @@ def test_every_command_checks_memory_and_disk(
     if kind == "memory":
         monkeypatch.setattr(resources, "available_memory_bytes", lambda: (1 << 20, "test"))
     else:
-        monkeypatch.setattr(resources, "available_disk_bytes", lambda path: 0)
+        full = shutil.disk_usage(tmp_path)._replace(free=0)  # a full disk
+        monkeypatch.setattr(shutil, "disk_usage", lambda path: full)
     args = [command, str(cfg), *STAGES.get(command, []), "--out", str(tmp_path / "out")]
     if command == "fuse":
         images = [str(tmp_path / n) for n in ("low.npy", "high.npy")]
         args = ["fuse", *images, "--out", str(tmp_path / "o.exr")]
     before = _files(tmp_path)
     r = runner.invoke(app, args)
-    needle = "not enough memory" if kind == "memory" else "not enough disk space"
-    assert_refused(r, tmp_path, before, needle, "available" if kind == "memory" else "free")
+    if kind == "memory":
+        assert_refused(r, tmp_path, before, "not enough memory", "is available (test)")
+    else:
+        assert_refused(r, tmp_path, before, "--out = ", "needs about", "but its file system has 0 B free")
 
 
 # ------------------------------------------------------------------ images for fuse

@@ -131,14 +131,45 @@ def test_dynamic_range_from_series_works_without_a_gain() -> None:
     assert dr.dr_db == pytest.approx(dynamic_range_db(dr.photons_sat, dr.photons_min))
 
 
-def test_model_helpers() -> None:
-    assert photons_min_model(0.5, 0.1, 1.0) == pytest.approx((math.sqrt(100 + 0.25) + 0.5) / 0.5)
-    assert dark_temporal_noise_e(1.0 + 1 / 12, 0.1, 1 / 12) == pytest.approx(10.0)
+@pytest.mark.parametrize(
+    ("eta", "k", "dark_var_dn"), [(0.5, 0.1, 1.0), (0.9, 0.072, 0.98**2), (0.2, 2.0, 40.0)]
+)
+def test_sensitivity_threshold_gives_unit_snr_in_the_linear_model(eta, k, dark_var_dn) -> None:
+    """At ``photons_min_model`` the linear model's SNR, eta p / sqrt(sigma_y.dark^2 / K^2 +
+    eta p) (signal and noise in electrons), is exactly 1, and it grows monotonically past it."""
+    p = photons_min_model(eta, k, dark_var_dn)
+
+    def snr(photons: float) -> float:
+        return eta * photons / math.sqrt(dark_var_dn / k**2 + eta * photons)
+
+    assert snr(p) == pytest.approx(1.0, rel=1e-12)
+    assert snr(0.9 * p) < 1.0 < snr(1.1 * p)
+
+
+def test_dark_noise_in_electrons_inverts_the_dn_variance() -> None:
+    """sigma_d [e-] from the dark variance [DN^2]: K^2 sigma_d^2 + sigma_q^2 gives the variance
+    back; m roundings of a stage-m word are taken off; a variance below the quantisation floor
+    clamps to 0."""
+    for var, k, q in ((1.0 + 1 / 12, 0.1, 1 / 12), (9.0, 0.072, 10 / 12)):
+        sd = dark_temporal_noise_e(var, k, q)
+        assert (k * sd) ** 2 + q == pytest.approx(var)
+    assert dark_temporal_noise_e(0.05, 0.1, 1 / 12) == 0.0
     assert dynamic_range_db(1000.0, 1.0) == pytest.approx(60.0)
     with pytest.raises(BenchSimError):
         dynamic_range_db(0.0, 1.0)
-    mean = np.array([10.0, 20.0, 30.0])
-    assert fit_conversion_gain(mean, 0.5 * mean, 0.0, 0.0, 100.0) == pytest.approx(0.5)
+
+
+def test_conversion_gain_is_the_photon_transfer_slope_over_the_linear_range() -> None:
+    """Poisson electrons times K (plus a dark floor): the fitted slope is K within the scatter of
+    the variance estimates; levels above 70 % of saturation (here with a wrong slope) are not
+    used."""
+    rng = np.random.default_rng(11)
+    k = 0.25
+    electrons = np.geomspace(50, 20000, 30)
+    samples = rng.poisson(electrons[:, None], (30, 20000)) * k + rng.normal(0, 2.0, (30, 20000))
+    mean, var = samples.mean(axis=1), samples.var(axis=1, ddof=1)
+    var[mean > 0.7 * k * 20000] *= 3.0  # outside the fit range: must not matter
+    assert fit_conversion_gain(mean, var, 0.0, 4.0, k * 20000) == pytest.approx(k, rel=0.01)
 
 
 def test_spatial_nonuniformity_from_stacks() -> None:

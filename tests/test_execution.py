@@ -60,6 +60,16 @@ def test_resumed_indices_keep_their_streams() -> None:
     assert part[0].value == full[4].value and part[1].value == full[1].value
 
 
+def test_values_dropped_after_on_result_when_asked() -> None:
+    seen: dict[int, list[float]] = {}
+    outs = run_tasks(
+        _draw, [(2, 0), (2, 1)], client=None, keep_values=False,
+        on_result=lambda o: seen.update({o.index: o.value}),
+    )
+    assert [o.index for o in outs] == [0, 1] and all(o.ok and o.value is None for o in outs)
+    assert seen[1] == task_generator(2, 1).normal(size=4).tolist()
+
+
 def test_worker_cache_builds_once() -> None:
     calls: list[int] = []
     key = "test-worker-cache-builds-once"

@@ -115,13 +115,17 @@ def test_three_stages_highest_unsaturated() -> None:
         fuse_stages_highest_unsaturated(stages, beta=12, criterion="nope")  # type: ignore[arg-type]
 
 
-def test_fusion_is_deterministic_and_pure() -> None:
-    rng = np.random.default_rng(0)
-    g1 = rng.integers(0, 4096, (8, 8))
-    g2 = np.minimum(8 * g1, 4095)
+def test_noise_free_stages_fuse_to_a_linear_response_over_the_whole_range() -> None:
+    """Noise-free, consistent stage words (Gamma1 = k for every k in 0..4095, Gamma2 = 8 k
+    clipped at 4095): eq. 11 gives 8 k everywhere, i.e. a linear response over the fused range
+    0 .. 8 * 4095 DN, except at k = 512 = Phi_FS / 8, where Gamma2 has just clipped to 4095 and
+    the threshold (strict ">") still picks it: one DN short. The inputs are left untouched."""
+    k = np.arange(4096)
+    g1, g2 = k.copy(), np.minimum(8 * k, 4095)
     before = (g1.copy(), g2.copy())
-    a = fuse_dtdi_hdr_eq11(g1, g2, mu1=10, mu2=80, beta=12)
-    b = fuse_dtdi_hdr_eq11(g1, g2, mu1=10, mu2=80, beta=12)
-    np.testing.assert_array_equal(a.hdr, b.hdr)
+    hdr = fuse_dtdi_hdr_eq11(g1, g2, mu1=10, mu2=80, beta=12).hdr
+    off = np.flatnonzero(hdr != 8 * k)
+    np.testing.assert_array_equal(off, [512])
+    assert hdr[512] == 4095
     np.testing.assert_array_equal(g1, before[0])
     np.testing.assert_array_equal(g2, before[1])

@@ -73,23 +73,40 @@ def test_omega_extremes_and_range_check() -> None:
         omega_eq17(np.array([-1]), b)
 
 
-def test_eq18_is_evaluated_not_assumed() -> None:
-    rng = np.random.default_rng(5)
-    s = rng.uniform(0, 409, (64, 64))  # per-read signal, spread over the HDR range
-    g1 = np.minimum(np.round(10 * s), 4095)
-    g2 = np.minimum(np.round(80 * s), 4095)
-    hdr = fuse_dtdi_hdr_eq11(g1, g2, mu1=10, mu2=80, beta=12).hdr
-    res = evaluate_eq18(g1, g2, hdr, mu1=10, mu2=80, beta=12)
-    assert res.omega1 == omega_eq17(g1, stage_binning(12))
-    assert res.omega_hdr == omega_eq17(hdr, hdr_binning(12, 10, 80))
-    assert res.holds == (res.omega_hdr < min(res.omega1, res.omega2))
-    # here Gamma2 is 7/8 saturated (one huge bin): omega2 is largest, HDR spreads evenly
-    assert res.omega2 > res.omega1 and res.holds
-    # a scene where the HDR is not more uniform: everything dark -> HDR == Gamma2, equal omegas
-    dark = evaluate_eq18(g1 * 0, g2 * 0, hdr * 0, mu1=10, mu2=80, beta=12)
-    assert not dark.holds
+@pytest.mark.parametrize(
+    ("g1", "omega1", "holds"),
+    [
+        # counts [1, 1, 1, 1]: variance 0, omega1 = 0 = omega(HDR): eq. 18's "<" fails
+        ([[0, 1], [2, 3]], 0.0, False),
+        # counts [3, 0, 0, 1]: mean 1, population variance (4 + 1 + 1 + 0) / 4 = 1.5, / 4 px
+        ([[0, 0], [0, 3]], 0.375, True),
+    ],
+)
+def test_eq18_on_hand_computed_histograms(g1, omega1, holds) -> None:
+    """beta = 2 (4 bins), mu2/mu1 = 2: Gamma2 = [[0, 2], [3, 3]] has counts [1, 0, 1, 2] (mean 1,
+    variance 0.5, omega 0.125); the HDR image [[0, 2], [4, 6]] falls one pixel per HDR bin of
+    width 2 (omega 0). Eq. 18 holds only when omega(HDR) is below both stage omegas."""
+    g2 = np.array([[0, 2], [3, 3]])
+    hdr = np.array([[0.0, 2.0], [4.0, 6.0]])
+    res = evaluate_eq18(np.array(g1), g2, hdr, mu1=1, mu2=2, beta=2)
+    assert res.omega1 == pytest.approx(omega1)
+    assert res.omega2 == pytest.approx(0.125)
+    assert res.omega_hdr == pytest.approx(0.0)
+    assert res.holds is holds
     d = res.as_dict()
-    assert d["hdr_binning"]["n_bins"] == 4096 and d["variance"].startswith("population")
+    assert d["hdr_binning"]["n_bins"] == 4 and d["variance"].startswith("population")
+
+
+def test_eq18_fails_for_the_fused_image_of_a_dark_scene() -> None:
+    """A scene that never reaches the eq. 11 threshold: Gamma_HDR is Gamma2, so their omegas are
+    equal and eq. 18 cannot hold however the values spread."""
+    rng = np.random.default_rng(5)
+    g1 = rng.integers(0, 64, (64, 64))
+    g2 = np.minimum(8 * g1 + rng.integers(0, 8, g1.shape), 4095)
+    hdr = fuse_dtdi_hdr_eq11(g1, g2, mu1=10, mu2=80, beta=12).hdr
+    np.testing.assert_array_equal(hdr, g2)
+    res = evaluate_eq18(g1, g2, hdr, mu1=10, mu2=80, beta=12)
+    assert res.omega_hdr > 0 and not res.holds
 
 
 # ---------------------------------------------------------------- SNR

@@ -62,9 +62,14 @@ def parse_descriptor(path: Path) -> dict:
     return out
 
 
+#: fixed patterns well above the temporal residual of the 16-image spatial stacks, so that DSNU
+#: and PRNU are measurable at every stage (dark current 10 e- per frame, DSNU 2 e-)
+PATTERNS = {"dark_current_e_s": 1e5, "dsnu_e_s": 2e4, "column_offset_dn": 0.5, "prnu": 0.02}
+
+
 @pytest.fixture(scope="module")
 def ptc_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, BenchConfig]:
-    cfg = small_cfg()
+    cfg = small_cfg(sensor=PATTERNS)
     out = tmp_path_factory.mktemp("ptc")
     res = run_ptc(cfg, stages=[1, 4, 16], seed=5, out=out, lines=64, columns=128)
     return out, res, cfg
@@ -206,3 +211,75 @@ def test_measurement_raises_a_too_small_pedestal(tmp_path: Path) -> None:
     assert res["configured_pedestal_dn"] == 0 and res["pedestal_dn"] > 0
     dark = tifffile.imread(tmp_path / "stage_003" / "images" / "dark_a.tif")
     assert dark.min() > 0
+
+
+def test_ptc_recovers_dsnu_and_prnu_of_the_sensor(ptc_run) -> None:
+    """DSNU and PRNU from the EMVA 1288 spatial stacks of each stage: equal to those of this
+    physical sensor (its fixed pattern, drawn first from the run's seed, summed over the stage's
+    rows: a column pattern) within 5 %, and to the config's model values within the sampling
+    spread of a standard deviation over the image's columns."""
+    from bench_sim.sensor.emva import draw_fixed_pattern
+
+    _, res, cfg = ptc_run
+    s, t = cfg.sensor, cfg.timing.t_int_s
+    k = s.conversion_gain_dn_per_e
+    lines, cols, n_img = 64, 128, 16
+    fixed = draw_fixed_pattern(s, np.random.default_rng(5)).window(16, cols)  # drawn first
+
+    def tolerance(target_var: float, fixed_var: float, residual_var: float) -> float:
+        """4 sigma (relative) of a pattern's std estimated from one averaged image of lines x
+        cols pixels. The fixed part of the image (variance ``fixed_var`` over its pixels) is this
+        sensor's, so only the temporal residual left by averaging n_img images (``residual_var``,
+        subtracted by EMVA on average) scatters the sample variance: by
+        sqrt((4 F R + 2 R^2) / N) for N pixels."""
+        se_var = np.sqrt((4 * fixed_var * residual_var + 2 * residual_var**2) / (lines * cols))
+        return 4 * 0.5 * se_var / target_var
+
+    for m in (1, 4, 16):
+        r = res["results"][str(m)]
+        temporal_dn2 = r["measured"]["dark_temporal_noise_dn"] ** 2
+        # this sensor's stage pattern per column: dark value [DN] and mean gain of its m pixels
+        dark_dn = k * (fixed.dark_current_e_s[:m] * t).sum(axis=0) + m * fixed.column_offset_dn
+        gain = fixed.prnu_gain[:m].mean(axis=0)
+        dsnu_var = dark_dn.var()
+        tol = tolerance(dsnu_var, dsnu_var, temporal_dn2 / n_img)
+        # in DN (DSNU in e- divides it by the measured K, which has its own scatter)
+        assert r["spatial"]["dark_spatial_std_dn"] == pytest.approx(np.sqrt(dsnu_var), rel=tol), m
+        # PRNU as EMVA 1288 defines it: sqrt(s^2_bright - s^2_dark) / (mu_bright - mu_dark)
+        signal = r["spatial"]["bright_signal_dn"]
+        bright_var = (dark_dn + signal * gain / gain.mean()).var()
+        prnu_var = bright_var - dsnu_var
+        tol = tolerance(prnu_var, bright_var, (temporal_dn2 + k * signal) / n_img)
+        tol += tolerance(prnu_var, dsnu_var, temporal_dn2 / n_img)
+        assert r["spatial"]["prnu"] == pytest.approx(np.sqrt(prnu_var) / signal, rel=tol), m
+        # against the config: a std over n = 128 columns scatters by a further 1/sqrt(2n) (4 sigma)
+        spread = 4 / np.sqrt(2 * cols) + 0.05
+        assert abs(r["spatial"]["dsnu_e"] / r["expected"]["dsnu_e"] - 1) < spread, m
+        assert abs(r["spatial"]["prnu"] / r["expected"]["prnu"] - 1) < spread, m
+
+
+def test_emva1288_reference_package_reads_the_descriptor_files(ptc_run) -> None:
+    """The EMVA 1288 reference implementation (the ``emva1288`` package) reads ptc's descriptor
+    files and agrees with bench_sim's own analysis and with the config on K, the dark noise and
+    the quantum efficiency within 3 %."""
+    import logging
+
+    emva_process = pytest.importorskip("emva1288.process", reason="test dependency emva1288")
+    if not hasattr(np, "asfarray"):  # emva1288 1.0.2 calls np.asfarray, gone in numpy 2
+        np.asfarray = lambda a, dtype=np.float64: np.asarray(a, dtype=dtype)  # noqa: NPY201
+    logging.getLogger("emva1288").setLevel(logging.WARNING)
+    out, res, cfg = ptc_run
+    s = cfg.sensor
+    for m in (1, 4):
+        parsed = emva_process.ParseEmvaDescriptorFile(str(out / f"stage_{m:03d}" / "emva1288.txt"))
+        data = emva_process.Data1288(emva_process.LoadImageData(parsed.images).data)
+        ref = emva_process.Results1288(data.data, pixel_area=(s.pixel_pitch_m * 1e6) ** 2)
+        ours = res["results"][str(m)]["measured"]
+        assert ref.K == pytest.approx(ours["K_dn_per_e"], rel=0.03), m
+        assert ref.K == pytest.approx(s.conversion_gain_dn_per_e, rel=0.03), m
+        assert ref.QE / 100 == pytest.approx(s.quantum_efficiency, rel=0.03), m
+        assert ref.sigma_y_dark == pytest.approx(ours["dark_temporal_noise_dn"], rel=0.03), m
+        # in electrons the reference takes off one ADC rounding (1/12 DN^2); a stage-m word holds
+        # m pixel roundings, which bench_sim's own analysis takes off instead: same dark noise
+        one_rounding_e = np.sqrt(ours["dark_temporal_noise_dn"] ** 2 - 1 / 12) / ours["K_dn_per_e"]
+        assert ref.sigma_d == pytest.approx(one_rounding_e, rel=0.03), m

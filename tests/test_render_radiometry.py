@@ -133,3 +133,29 @@ def test_diffraction_psf_keeps_energy_and_blurs_edges():
                                 np.random.default_rng(0), engine="fast", first_frame=60)
     assert blurred.std() < 0.97 * sharp.std()
     assert blurred.mean() == pytest.approx(sharp.mean(), rel=0.01)
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_spot_irradiance_at_its_aim_point(engine):
+    """The spot alone, aimed at the drum point the camera looks at: its irradiance normal to the
+    beam there is ``lights.strong.irradiance_w_m2``, so the Lambertian print (rho = 0.5, normal
+    +z) shows L = rho * E * cos(i) / pi with cos(i) the beam's incidence on the surface, within
+    1 % (a point light: no sampling noise; the pixel footprint is far inside the beam)."""
+    aim = (0.0, 0.0, 0.10)
+    pos = (-0.10, 0.25, 0.45)
+    cfg = tiny_cfg(
+        target={"layout": "uniform", "uniform_reflectance": 0.5},
+        lights={
+            "weak": {"enabled": False},
+            "strong": {"irradiance_w_m2": 50.0, "aim_m": aim, "position_m": pos},
+        },
+        sensor={"rows": 8, "columns": 16},
+        lens={"model": "perspective"},
+    )
+    photons, setup = render_photons(cfg, 2, np.random.default_rng(1), engine=engine)
+    radiance = photons / setup.photons_per_radiance[None]
+    beam = np.subtract(aim, pos)
+    cos_i = -beam[2] / np.linalg.norm(beam)  # surface normal at the aim point: +z
+    expected = 0.5 * 50.0 * cos_i / math.pi
+    centre = radiance[:, 3:5, 7:9]  # the four pixels around the optical axis see the aim point
+    assert centre.mean() == pytest.approx(expected, rel=0.01)

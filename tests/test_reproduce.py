@@ -9,6 +9,9 @@ import pytest
 from typer.testing import CliRunner
 
 from bench_sim.cli import app
+from bench_sim.config import load_config, with_overrides
+from bench_sim.experiments.reproduce import run_reproduce
+from bench_sim.io import read_png_text
 
 runner = CliRunner()
 
@@ -22,6 +25,7 @@ FILES = (
     "table1.csv",
     "metrics.json",
     "report.md",
+    "snr_vs_signal.png",
 )
 KEYS = (
     "mu1", "mu2", "beta", "delta_psi_db_eq15", "stage_pairs_26_02_db", "dr_db",
@@ -56,6 +60,9 @@ def test_quick_writes_every_file_and_key(quick_runs):
     assert m["stage_pairs_26_02_db"] == [[5, 100]]
     report = (out / "report.md").read_text()
     assert "18.06 dB" in report and "26.02" in report and "eq. 18" in report
+    assert f"Gain over the better input, Gamma1: {m['delta_dr_db_vs_gamma1']:.2f} dB" in report
+    assert "*by construction*" in report and m["gain_over_gamma2_by_construction"]
+    assert read_png_text(out / "snr_vs_signal.png")["seed"] == 7
 
 
 def test_quick_shows_the_papers_qualitative_result(quick_runs):
@@ -102,3 +109,41 @@ def test_same_seed_gives_byte_identical_data_files(quick_runs):
     assert set(names) >= {"gamma1.tiff", "gamma2.tiff", "gamma_hdr.exr", "fig3_stages.png", "table1.csv"}
     assert ".bench-sim-output.json" in names
     assert [n for n in names if (a / n).read_bytes() != (b / n).read_bytes()] == []
+
+
+@pytest.mark.parametrize(
+    ("overrides", "clips_on_word"),
+    [
+        ({"dtdi": {"beta_bits": 16}}, {"gamma1": False, "gamma2": True}),
+        ({"fusion": {"mu1": 10, "mu2": 40}}, {"gamma1": True, "gamma2": True}),
+    ],
+    ids=["beta16", "stages10-40"],
+)
+def test_report_states_what_this_run_measured(tmp_path, overrides, clips_on_word):
+    """Every number, stage pair and verdict of report.md comes from the run: a 16-bit word (stage
+    10 clips on its pixels, so eq. 15 does not hold) and another stage pair (eq. 15 = 12.04 dB)."""
+    cfg = with_overrides(load_config(), overrides)
+    m = run_reproduce(cfg, seed=3, out=tmp_path, quick=True)
+    report = (tmp_path / "report.md").read_text()
+    mu1, mu2 = m["mu1"], m["mu2"]
+    eq15 = 20 * math.log10(mu2 / mu1)
+    assert m["delta_psi_db_eq15"] == pytest.approx(eq15)
+    assert m["stage_clips_on_word"] == clips_on_word
+    assert f"Gain over Gamma2: {m['delta_dr_db_vs_gamma2']:.2f} dB" in report
+    assert f"20 lg({mu2}/{mu1}) = {eq15:.2f} dB" in report
+    agrees = abs(m["delta_dr_db_vs_gamma2"] - eq15) <= 0.5
+    if all(clips_on_word.values()):
+        assert m["gain_over_gamma2_by_construction"] and agrees and "*by construction*" in report
+    else:
+        # 16-bit word: stage 10 tops out at its pixels' clip, far below Phi_FS * mu1/mu2 ...
+        assert not m["gain_over_gamma2_by_construction"] and not agrees
+        assert "*by construction*" not in report and "does not agree" in report
+        assert "clips on the pixel (full well / ADC top)" in report
+    if (mu1, mu2) != (10, 80):
+        assert "18.06" not in report  # nothing of the default stage pair is left in the text
+    assert f"stage {mu2} saturates the brightly lit region" in report
+    sat2 = m["saturated_fraction"]["gamma2"]
+    assert (f"whose {sat2:.0%} saturated pixels" in report) == (sat2 > 0)
+    table = report.split("| qualitative result")[1].split("\n\n")[0].splitlines()[2:]
+    assert len(table) == len(m["qualitative"])
+    assert sum(row.endswith("| **no** |") for row in table) == sum(not v for v in m["qualitative"].values())

@@ -60,6 +60,7 @@ from bench_sim.metrics.emva1288 import SaturationMethod, dynamic_range_from_seri
 from bench_sim.metrics.snr import snr_versus_signal
 from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import (
+    full_scale_dn,
     stage_clips_on_word,
     stage_saturation_photons,
     stage_snr1_photons,
@@ -151,6 +152,42 @@ class ChainDR:
         same_offset = self.offsets_dn.get(self.mu1) == self.offsets_dn.get(self.mu2)
         return bool(clips.get(self.mu1)) and bool(clips.get(self.mu2)) and same_offset
 
+    def fusion_switch(self) -> dict[str, float]:
+        """Where ``Gamma_HDR`` switches from ``Gamma2`` to ``(mu2/mu1) Gamma1`` (eq. 11) and what
+        its SNR does there.
+
+        The switch sits at the HDR signal ``Phi_FS - P2`` [DN, stage-``mu2`` units] (``P2`` the
+        offset of ``Gamma2``'s word). Below it the HDR pixel is ``Gamma2``; above it, the
+        ``mu1`` read sum scaled by ``mu2/mu1``, whose relative noise is larger (fewer electrons,
+        read noise of ``mu1`` reads), so the SNR drops. Returned: ``threshold_dn``,
+        ``photons`` (photons per pixel per frame at the switch, interpolated on the HDR's mean
+        response), and the HDR's measured SNR at the last level below 0.9 and the first level
+        above 1.1 times the threshold (``snr_below``, ``snr_above``; NaN where the series has no
+        such level), with those levels' photons.
+        """
+        hdr = self.images["hdr"]
+        thr = float(full_scale_dn(self.beta_bits)) - float(self.offsets_dn[self.mu2])
+        mean = np.asarray(hdr.mean_dn, dtype=np.float64)
+        snr = np.asarray(hdr.snr, dtype=np.float64)
+        below = np.flatnonzero((mean < 0.9 * thr) & (self.photons > 0))
+        above = np.flatnonzero(mean > 1.1 * thr)
+        rising = np.flatnonzero(np.diff(mean) > 0)
+        cross = float("nan")
+        if rising.size and mean[rising[0]] <= thr <= mean.max():
+            k = int(np.argmax(mean >= thr))
+            if k > 0:
+                m0, m1, p0, p1 = mean[k - 1], mean[k], self.photons[k - 1], self.photons[k]
+                cross = float(p0 + (thr - m0) * (p1 - p0) / (m1 - m0)) if m1 > m0 else float(p1)
+        nan = float("nan")
+        return {
+            "threshold_dn": thr,
+            "photons": cross,
+            "snr_below": float(snr[below[-1]]) if below.size else nan,
+            "photons_below": float(self.photons[below[-1]]) if below.size else nan,
+            "snr_above": float(snr[above[0]]) if above.size else nan,
+            "photons_above": float(self.photons[above[0]]) if above.size else nan,
+        }
+
     @property
     def level_step_db_max(self) -> float:
         p = self.photons[self.photons > 0]
@@ -185,6 +222,7 @@ class ChainDR:
             "stage_clips_on_word": {str(m): v for m, v in self.stage_clips_on_word.items()},
             "gain_over_gamma2_by_construction": self.gain_over_gamma2_by_construction,
             "eq15_db": self.eq15_db,
+            "fusion_switch": self.fusion_switch(),
         }
 
 

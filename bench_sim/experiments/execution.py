@@ -22,6 +22,7 @@ each machine). One module serves both, so every experiment gets the same guarant
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import os
 import time
@@ -199,6 +200,7 @@ def run_tasks(
     client: Any,
     indices: Sequence[int] | None = None,
     on_result: Callable[[TaskOutcome], None] | None = None,
+    keep_values: bool = True,
 ) -> list[TaskOutcome]:
     """Run ``func(arg)`` for every ``arg`` and report each outcome as it completes.
 
@@ -216,33 +218,44 @@ def run_tasks(
         a resumed run passes the indices of the tasks still to do.
     on_result
         Called in this process with each outcome, in completion order.
+    keep_values
+        Keep each task's value in the returned outcomes. ``False`` drops it once ``on_result``
+        has seen it (``value`` is ``None``), so a run whose tasks return large arrays that
+        ``on_result`` writes away holds one result at a time, however many tasks it has.
 
     Returns
     -------
     list of TaskOutcome
         In the order of ``args``.
+
+    Notes
+    -----
+    Each task's result is released on its worker as soon as this process has it, so worker
+    memory does not grow with the number of tasks.
     """
     idx = list(range(len(args))) if indices is None else [int(i) for i in indices]
     if len(idx) != len(args):
         raise BenchSimError(f"indices: {len(idx)} given for {len(args)} tasks")
     outcomes: dict[int, TaskOutcome] = {}
+
+    def record(out: TaskOutcome) -> None:
+        if on_result is not None:
+            on_result(out)
+        outcomes[out.index] = out if keep_values else dataclasses.replace(out, value=None)
+
     if client is None:
         for i, arg in zip(idx, args, strict=True):
-            out = _run_one(func, i, arg)
-            outcomes[i] = out
-            if on_result is not None:
-                on_result(out)
+            record(_run_one(func, i, arg))
         return [outcomes[i] for i in idx]
     from distributed import as_completed
 
-    futures = client.map(_run_one, [func] * len(args), idx, list(args), pure=False)
+    pending = as_completed(client.map(_run_one, [func] * len(args), idx, list(args), pure=False))
     try:
-        for fut in as_completed(futures):
+        for fut in pending:  # only ``pending`` holds the futures not yet done
             out = fut.result()
-            outcomes[out.index] = out
-            if on_result is not None:
-                on_result(out)
+            fut.release()  # the worker may drop the result now
+            record(out)
     except BaseException:
-        client.cancel(futures)
+        client.cancel(list(pending.futures))
         raise
     return [outcomes[i] for i in idx]

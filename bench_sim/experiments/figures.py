@@ -1,19 +1,19 @@
-"""Figures of the reproduction: Fig. 3 (stage sweep) and Fig. 4 (Gamma_HDR and Gamma_TRA with
-insets). Matplotlib with the Agg backend; written atomically as PNG with provenance."""
+"""Figures of the reproduction: Fig. 3 (stage sweep), Fig. 4 (Gamma_HDR and Gamma_TRA with
+insets) and the SNR of Gamma1, Gamma2 and Gamma_HDR versus signal. Matplotlib with the Agg
+backend; written atomically as PNG with the provenance in the ``bench_sim`` text chunk
+(:func:`bench_sim.io.write_figure_png`)."""
 
 from __future__ import annotations
 
-import io
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bench_sim.io import atomic_path
+from bench_sim.io import write_figure_png
 
-__all__ = ["stage_display", "fig3_stages", "fig4_hdr", "Box"]
+__all__ = ["stage_display", "fig3_stages", "fig4_hdr", "snr_versus_signal_figure", "Box"]
 
 #: (line0, line1, col0, col1) of an inset, in output-image pixels
 Box = tuple[int, int, int, int]
@@ -22,13 +22,6 @@ Box = tuple[int, int, int, int]
 def stage_display(stage_dn: np.ndarray, beta: int, gamma: float = 2.2) -> np.ndarray:
     """One display scale for every stage image: ``(DN / (2**beta - 1)) ** (1/gamma)`` in 0..1."""
     return np.clip(np.asarray(stage_dn, dtype=np.float64) / (2**beta - 1), 0.0, 1.0) ** (1.0 / gamma)
-
-
-def _save(fig: Any, path: Path, meta: Mapping[str, Any]) -> None:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=fig.dpi, metadata={"Description": json.dumps(meta, sort_keys=True)})
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(buf.getvalue())
 
 
 def fig3_stages(
@@ -57,9 +50,7 @@ def fig3_stages(
         f"DTDI stage images, one display scale: (DN / {2**beta - 1})^(1/2.2)", fontsize=10
     )
     fig.tight_layout()
-    _save(fig, path, meta)
-    plt.close(fig)
-    return path
+    return write_figure_png(path, fig, meta, dpi=fig.dpi)
 
 
 def fig4_hdr(
@@ -72,10 +63,12 @@ def fig4_hdr(
     path: Path,
     meta: Mapping[str, Any],
     tra_name: str,
+    inset_titles: Sequence[str] | None = None,
 ) -> Path:
     """Fig. 4: (a) Gamma_HDR (linear display) and (b) Gamma_TRA side by side; below, insets of a
-    dark region (Gamma1 noise vs Gamma_TRA, detail recovered from stage mu2) and of a bright
-    region (Gamma2 saturated vs Gamma_TRA, detail kept from stage mu1). Inputs in 0..1."""
+    dark region (Gamma1 vs Gamma_TRA) and of a bright region (Gamma2 vs Gamma_TRA). Inputs in
+    0..1. ``inset_titles``: the four inset captions (the caller states what was measured there);
+    default: which image each inset shows."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -95,11 +88,16 @@ def fig4_hdr(
         for box, colour in ((dark_box, "tab:cyan"), (bright_box, "tab:orange")):
             l0, l1, c0, c1 = box
             ax.add_patch(Rectangle((c0, l0), c1 - c0, l1 - l0, fill=False, ec=colour, lw=1.5))
+    titles = list(inset_titles) if inset_titles is not None else [
+        "dark, $\\Gamma_1$", "dark, $\\Gamma_{TRA}$", "bright, $\\Gamma_2$", "bright, $\\Gamma_{TRA}$"
+    ]
+    if len(titles) != 4:
+        raise ValueError(f"inset_titles: need 4 captions, got {len(titles)}")
     insets = [
-        (gamma1_display, dark_box, "tab:cyan", "dark, $\\Gamma_1$: in the noise"),
-        (tra, dark_box, "tab:cyan", "dark, $\\Gamma_{TRA}$: from stage $\\mu_2$"),
-        (gamma2_display, bright_box, "tab:orange", "bright, $\\Gamma_2$: saturated"),
-        (tra, bright_box, "tab:orange", "bright, $\\Gamma_{TRA}$: from stage $\\mu_1$"),
+        (gamma1_display, dark_box, "tab:cyan", titles[0]),
+        (tra, dark_box, "tab:cyan", titles[1]),
+        (gamma2_display, bright_box, "tab:orange", titles[2]),
+        (tra, bright_box, "tab:orange", titles[3]),
     ]
     for k, (img, box, colour, title) in enumerate(insets):
         ax = fig.add_subplot(grid[1, k])
@@ -115,6 +113,68 @@ def fig4_hdr(
             s.set_linewidth(2)
     fig.text(0.5, 0.005, "insets stretched to their own 0.5-99.5 % range", ha="center", fontsize=8)
     fig.tight_layout()
-    _save(fig, path, meta)
-    plt.close(fig)
-    return path
+    return write_figure_png(path, fig, meta, dpi=fig.dpi)
+
+
+def snr_versus_signal_figure(
+    photons: np.ndarray,
+    snr: Mapping[str, np.ndarray],
+    photons_min: Mapping[str, float],
+    photons_sat: Mapping[str, float],
+    switch_photons: float,
+    path: Path,
+    meta: Mapping[str, Any],
+    labels: Mapping[str, str],
+) -> Path:
+    """SNR versus signal of ``Gamma1``, ``Gamma2`` and ``Gamma_HDR`` from one photon-transfer
+    series through the chain (log-log), with each image's SNR = 1 point and saturation point
+    (EMVA 1288) marked and the eq. 11 switch of ``Gamma_HDR`` drawn as a vertical line.
+
+    Parameters
+    ----------
+    photons
+        Levels of the series [mean photons per pixel per frame], shape (L,).
+    snr
+        Image name -> measured SNR per level (dimensionless; NaN/inf where undefined).
+    photons_min, photons_sat
+        Image name -> SNR = 1 point and saturation point [photons per pixel per frame].
+    switch_photons
+        Level where ``Gamma_HDR`` switches from ``Gamma2`` to the scaled ``Gamma1`` (NaN: none).
+    labels
+        Image name -> legend label (e.g. with its measured DR).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    p = np.asarray(photons, dtype=np.float64)
+    fig, ax = plt.subplots(figsize=(7.2, 4.6), dpi=110)
+    colours = {"gamma1": "tab:blue", "gamma2": "tab:orange", "hdr": "0.35"}
+    for name, values in snr.items():
+        y = np.asarray(values, dtype=np.float64)
+        sat = photons_sat.get(name)
+        # up to the saturation point: beyond it the clipped images have no temporal noise left
+        ok = (p > 0) & np.isfinite(y) & (y > 0) & (p <= (sat if sat and np.isfinite(sat) else np.inf))
+        c = colours.get(name)
+        wide = name == "hdr"  # drawn wide underneath: it follows Gamma2, then the scaled Gamma1
+        ax.plot(p[ok], y[ok], "-", lw=5 if wide else 1.5, alpha=0.45 if wide else 1.0, color=c,
+                zorder=1 if wide else 3, label=labels.get(name, name))
+        for x, mk in ((photons_min.get(name), "o"), (photons_sat.get(name), "s")):
+            if x is not None and np.isfinite(x) and x > 0:
+                ax.plot([x], [np.interp(np.log(x), np.log(p[ok]), y[ok])], mk, color=c, ms=5, mfc="none")
+    if np.isfinite(switch_photons) and switch_photons > 0:
+        ax.axvline(switch_photons, color="0.5", ls="--", lw=1)
+        ax.text(switch_photons, ax.get_ylim()[0], " eq. 11 switch", rotation=90, va="bottom", fontsize=8,
+                color="0.35")
+    ax.axhline(1.0, color="0.7", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("mean photons per pixel per frame")
+    ax.set_ylabel("SNR (temporal)")
+    ax.set_title("SNR versus signal through sensor, DTDI and eq. 11 (o: SNR = 1, squares: saturation)",
+                 fontsize=9)
+    ax.legend(fontsize=8, loc="upper left")
+    ax.grid(True, which="both", alpha=0.25)
+    fig.tight_layout()
+    return write_figure_png(path, fig, meta, dpi=fig.dpi)

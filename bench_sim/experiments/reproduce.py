@@ -7,7 +7,8 @@ eq. 16-18, eq. 15, measured dynamic range through the whole chain) -> figures an
 Outputs (``results/paper`` by default): ``fig3_stages.png``, ``fig4_hdr.png``, ``gamma1.tiff``,
 ``gamma2.tiff`` (16-bit), ``gamma_hdr.exr`` (channels ``Y`` = Gamma_HDR [DN, stage-mu2 units] and
 ``source`` = the stage each pixel came from), ``gamma_tra.png``, ``table1.csv``, ``metrics.json``,
-``report.md``. Every file carries the config, seed and version.
+``report.md``, ``snr_vs_signal.png`` (SNR of Gamma1, Gamma2, Gamma_HDR versus signal from the
+photon-transfer series through the chain). Every file carries the config, seed and version.
 """
 
 from __future__ import annotations
@@ -249,7 +250,8 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     eq18 = evaluate_eq18(g1, g2, fused.hdr + off2, mu1=mu1, mu2=mu2, beta=beta)
     clip = 2**beta - 1
     dr_size = {"columns": min(CHAIN_DR_COLUMNS, cfg.sensor.columns)}
-    dr = measure_chain_dynamic_range(cfg, rng, **dr_size, **({"n_levels": 24} if quick else {})).as_dict()
+    chain_dr = measure_chain_dynamic_range(cfg, rng, **dr_size, **({"n_levels": 24} if quick else {}))
+    dr = chain_dr.as_dict()
     panel = setup.grid.panel
     patches = _patch_slices(panel, setup.geom, cfg, lines)
     right = {k: v for k, v in patches.items() if k.startswith("wedge_right")}
@@ -309,12 +311,20 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         "rows": rows,
         "frames": frames,
         "stages": list(stages),
+        "fig3_stages": list(fig3),
         "delta_psi_db_eq15": eq15,
         "paper_delta_psi_db": PAPER["delta_psi_db"],
         "stage_pairs_26_02_db": [list(p) for p in pairs],
-        "dr_db": {("gamma_hdr" if k == "hdr" else k): v for k, v in dr["dr_db"].items()},
+        "dr_db": _images(dr["dr_db"]),
+        "dr_db_extrapolated": _images(dr["dr_db_extrapolated"]),
+        "dr_db_model": _images(dr["model_dr_db"]),
         "delta_dr_db_vs_gamma1": dr["delta_db_vs_gamma1"],
         "delta_dr_db_vs_gamma2": dr["delta_db_vs_gamma2"],
+        "delta_dr_db_vs_gamma2_extrapolated": dr["delta_db_vs_gamma2_extrapolated"],
+        "gain_over_gamma2_by_construction": dr["gain_over_gamma2_by_construction"],
+        "stage_clips_on_word": {"gamma1": dr["stage_clips_on_word"][str(mu1)],
+                                "gamma2": dr["stage_clips_on_word"][str(mu2)]},
+        "fusion_switch": dr["fusion_switch"],
         "dr_details": {k: v for k, v in dr.items() if k not in ("series",)},
         "omega": {"gamma1": eq18.omega1, "gamma2": eq18.omega2, "gamma_hdr": eq18.omega_hdr},
         "omega_paper": PAPER["omega"],
@@ -343,6 +353,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
               "config_sha256": meta["config_sha256"]}
     with output_set(out, record) as tmp:  # the files as one set: all of them or none
         _write_outputs(tmp, cfg, metrics, meta, stage_images, fig3, fused, tra8, panel, lines)
+        _snr_figure(tmp / "snr_vs_signal.png", chain_dr, meta)
         timer.add("write", time.perf_counter() - t0)
         metrics["timings_s"] = {k: round(v, 3) for k, v in timer.steps.items()}
         metrics["wall_s"] = round(time.perf_counter() - t_start, 3)
@@ -352,6 +363,29 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         print(f"  {step:<12} {s:8.2f} s")
     print(f"  {'total':<12} {metrics['wall_s']:8.2f} s  -> {out}")
     return metrics
+
+
+def _images(per_image: dict[str, Any]) -> dict[str, Any]:
+    """Chain-DR keys (``gamma1``, ``gamma2``, ``hdr``) -> metrics.json's (``gamma_hdr``)."""
+    return {("gamma_hdr" if k == "hdr" else k): v for k, v in per_image.items()}
+
+
+def _snr_figure(path: Path, chain_dr: Any, meta: dict[str, Any]) -> None:
+    from bench_sim.experiments.figures import snr_versus_signal_figure
+
+    names = {"gamma1": f"$\\Gamma_1$ (m = {chain_dr.mu1})", "gamma2": f"$\\Gamma_2$ (m = {chain_dr.mu2})",
+             "hdr": "$\\Gamma_{HDR}$ (eq. 11)"}
+    img = chain_dr.images
+    snr_versus_signal_figure(
+        chain_dr.photons,
+        {k: v.snr for k, v in img.items()},
+        {k: v.photons_min for k, v in img.items()},
+        {k: v.photons_sat for k, v in img.items()},
+        chain_dr.fusion_switch()["photons"],
+        path,
+        dict(meta, figure="SNR versus signal of Gamma1, Gamma2 and Gamma_HDR (photon-transfer series)"),
+        {k: f"{names[k]}: DR {v.dr_db:.1f} dB" for k, v in img.items()},
+    )
 
 
 def _write_outputs(
@@ -381,6 +415,7 @@ def _write_outputs(
     write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})"))
     fig3_stages(stage_images, fig3, beta, out / "fig3_stages.png", meta)
     dark_box, bright_box = _inset_boxes(panel, cfg, lines)
+    dark, bright = metrics["darkest_patch"], metrics["brightest_patch"]
     fig4_hdr(
         np.clip(fused.hdr / fused.full_scale_dn, 0, 1),
         tra8 / 255.0,
@@ -391,6 +426,12 @@ def _write_outputs(
         out / "fig4_hdr.png",
         meta,
         cfg.fusion.tra,
+        inset_titles=(
+            f"dark, $\\Gamma_1$: darkest step SNR {dark['snr']['gamma1']:.1f}",
+            f"dark, $\\Gamma_{{TRA}}$: darkest step, HDR SNR {dark['snr']['gamma_hdr']:.1f}",
+            f"bright, $\\Gamma_2$: {bright['gamma2_saturated_fraction']:.0%} clipped",
+            f"bright, $\\Gamma_{{TRA}}$: {bright['gamma_hdr_saturated_fraction']:.0%} clipped",
+        ),
     )
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")

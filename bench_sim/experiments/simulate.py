@@ -361,13 +361,19 @@ def simulate(
         return run_pass(cfg, st, int(seed), on_frames=lambda n: bar.update(task, advance=n)).dataset
 
 
-def check_inputs(cfg: BenchConfig, stages: Iterable[int], out: Path | None = None, fmt: str = "zarr") -> None:
-    """Check everything a pass needs besides the config itself before any rendering: the output
-    folder (if any), the memory and disk of the run, the target image file, the backend
-    (:func:`bench_sim.experiments.preflight.preflight`); raises :class:`BenchSimError` (one line)."""
+def check_inputs(
+    cfg: BenchConfig, stages: Iterable[int] | None = None, out: Path | None = None, fmt: str = "zarr"
+) -> None:
+    """Check everything a pass needs besides the config itself before any rendering: the target
+    image file and, given the ``stages``, the output folder (if any), the memory and disk of the
+    run and the backend (:func:`bench_sim.experiments.preflight.preflight`); raises
+    :class:`BenchSimError` (one line)."""
     from bench_sim.experiments.preflight import preflight
     from bench_sim.resources import estimate_simulate
 
+    if stages is None:  # the inputs alone
+        preflight(cfg, out=None, estimate=None, render=False)
+        return
     preflight(cfg, out=out, estimate=estimate_simulate(cfg, stages, fmt))
 
 

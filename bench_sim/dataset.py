@@ -1,0 +1,254 @@
+"""Reading a synthetic validation dataset made by ``bench-sim dataset``.
+
+- :func:`open` ``(DIR)`` -> :class:`xarray.Dataset` (lazy, Dask-backed): the arrays with
+  dimensions ``sample``, ``stage``, ``line``, ``column`` and the manifest's columns (the
+  randomised values, the summary metrics) as coordinates along ``sample``.
+- :func:`iter_samples` ``(DIR)`` -> one :class:`Sample` at a time: numpy arrays and the
+  sample's parameters and metrics, without xarray.
+
+Layout of ``DIR`` (the writer is :mod:`bench_sim.experiments.dataset`):
+
+=========================== =====================================================================
+``data.zarr``               Zarr v3: ``dn``, ``mean_dn``, ``photons``, ``reflectance``,
+                            ``clipped`` (``sample, stage, line, column``), ``hdr`` and
+                            ``hdr_source`` (``sample, line, column``) when two stages are fused;
+                            one chunk per sample and stage; ``units`` on every array
+``samples/NNNNNNNN.json``   one record per finished sample, written after its arrays are on
+                            disk: status (``complete`` / ``failed``), values, metrics, time
+``manifest.parquet``/``.csv`` one row per sample (complete, failed or pending)
+``dataset.json``            the spec, provenance (version, config hashes), the schema
+``README.md``               the dataset card; ``thumbnails.png`` its thumbnail sheet
+``.bench-sim-output.json``  the completion record, written last, when every sample is complete
+=========================== =====================================================================
+
+A dataset is written sample by sample, so ``DIR`` can hold an incomplete one (a run that was
+stopped, or is still going): only samples with a ``complete`` record are valid. :func:`open` and
+:func:`iter_samples` refuse an incomplete dataset unless asked for its complete samples
+(``incomplete=True``). This module imports nothing heavy at import time.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bench_sim.errors import BenchSimError
+from bench_sim.io import OUTPUT_MARKER
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+__all__ = [
+    "open",
+    "iter_samples",
+    "Sample",
+    "DATA_STORE",
+    "DATASET_JSON",
+    "RECORDS_DIR",
+    "MANIFEST_PARQUET",
+    "MANIFEST_CSV",
+    "CARD",
+    "THUMBNAILS",
+    "COMPLETION_RECORD",
+    "DATASET_KIND",
+    "STAGE_VARIABLES",
+    "FUSED_VARIABLES",
+    "record_path",
+    "read_info",
+    "read_records",
+    "complete_samples",
+    "is_complete",
+]
+
+DATA_STORE = "data.zarr"
+DATASET_JSON = "dataset.json"
+RECORDS_DIR = "samples"
+MANIFEST_PARQUET = "manifest.parquet"
+MANIFEST_CSV = "manifest.csv"
+CARD = "README.md"
+THUMBNAILS = "thumbnails.png"
+#: written last, when every sample is complete (the output-set marker of :mod:`bench_sim.io`)
+COMPLETION_RECORD = OUTPUT_MARKER
+#: ``kind`` of ``dataset.json``: how a folder is recognised as a bench_sim dataset
+DATASET_KIND = "bench_sim dataset"
+
+#: variables with dimensions (sample, stage, line, column) -> dtype
+STAGE_VARIABLES: dict[str, str] = {
+    "dn": "uint32", "mean_dn": "float64", "photons": "float64", "reflectance": "float32", "clipped": "bool",
+}
+#: variables with dimensions (sample, line, column), present when two stages are fused -> dtype
+FUSED_VARIABLES: dict[str, str] = {"hdr": "float32", "hdr_source": "int16"}
+
+
+def record_path(folder: str | Path, index: int) -> Path:
+    """The completion record of sample ``index``."""
+    return Path(folder) / RECORDS_DIR / f"{int(index):08d}.json"
+
+
+def read_info(folder: str | Path) -> dict[str, Any]:
+    """``dataset.json`` of a dataset folder (one-line error if it is not one)."""
+    path = Path(folder) / DATASET_JSON
+    try:
+        info = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise BenchSimError(f"{str(folder)!r}: not a bench_sim dataset (no {DATASET_JSON})") from None
+    except (OSError, ValueError) as exc:
+        raise BenchSimError(f"{str(path)!r}: unreadable ({exc})") from None
+    if info.get("kind") != DATASET_KIND:
+        raise BenchSimError(f"{str(path)!r}: not a bench_sim dataset description")
+    return info
+
+
+def read_records(folder: str | Path) -> dict[int, dict[str, Any]]:
+    """Sample index -> its record, for every readable record (complete or failed)."""
+    out: dict[int, dict[str, Any]] = {}
+    rec_dir = Path(folder) / RECORDS_DIR
+    if not rec_dir.is_dir():
+        return out
+    for path in sorted(rec_dir.glob("*.json")):
+        try:
+            rec = json.loads(path.read_text())
+            out[int(rec["sample"])] = rec
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # a torn or foreign file: the sample counts as not done
+    return out
+
+
+def complete_samples(folder: str | Path) -> list[int]:
+    """Indices of the samples whose record says ``complete``, sorted."""
+    return sorted(i for i, r in read_records(folder).items() if r.get("status") == "complete")
+
+
+def is_complete(folder: str | Path) -> bool:
+    """Whether the dataset's completion record exists (every sample complete)."""
+    return (Path(folder) / COMPLETION_RECORD).is_file()
+
+
+def _selection(
+    folder: Path, incomplete: bool, only: Sequence[int] | None
+) -> tuple[dict[str, Any], list[int]]:
+    info = read_info(folder)
+    n = int(info["samples"])
+    done = complete_samples(folder)
+    if not incomplete and len(done) < n:
+        raise BenchSimError(
+            f"{str(folder)!r}: incomplete dataset ({len(done)} of {n} samples complete): complete it with "
+            "bench-sim dataset SPEC --out DIR --resume, or read its complete samples with incomplete=True"
+        )
+    if only is not None:
+        bad = [i for i in only if i not in set(done)]
+        if bad:
+            raise BenchSimError(f"sample {bad[0]}: not a complete sample of {str(folder)!r}")
+        done = [int(i) for i in only]
+    return info, done
+
+
+def open(folder: str | Path, *, incomplete: bool = False) -> xr.Dataset:
+    """Open a dataset lazily as an :class:`xarray.Dataset`.
+
+    Parameters
+    ----------
+    folder
+        The dataset folder (``bench-sim dataset ... --out DIR``).
+    incomplete
+        Open a dataset that is not complete, keeping its complete samples only. Without it an
+        incomplete dataset is refused (one line).
+
+    Returns
+    -------
+    xarray.Dataset
+        ``data.zarr`` (Dask arrays: nothing is read until used), restricted to the complete
+        samples, with the manifest's columns (``seed``, every randomised key, ``config_sha256``,
+        the summary metrics, ``wall_s``) as coordinates along ``sample``.
+    """
+    import xarray as xr
+
+    folder = Path(folder)
+    _, done = _selection(folder, incomplete, None)
+    ds = xr.open_zarr(folder / DATA_STORE, consolidated=True)
+    ds = ds.sel(sample=done)
+    records = read_records(folder)
+    table = [
+        {**r.get("values", {}), "config_sha256": r.get("config_sha256"), **r.get("metrics", {}),
+         "wall_s": r.get("wall_s")}
+        for r in (records[i] for i in done)
+    ]
+    for key in dict.fromkeys(k for row in table for k in row):
+        ds.coords[key] = ("sample", np.asarray([row.get(key) for row in table]))
+    return ds
+
+
+@dataclass
+class Sample:
+    """One sample of a dataset.
+
+    Attributes
+    ----------
+    index
+        The sample's index (its position in the dataset, its stream's spawn key).
+    stages
+        The stored stages, in the order of the first axis of the stage arrays.
+    arrays
+        Variable -> numpy array: ``(stage, line, column)`` for ``dn``, ``mean_dn``, ``photons``,
+        ``reflectance``, ``clipped``; ``(line, column)`` for ``hdr``, ``hdr_source``.
+    values
+        The randomised config values (dotted keys; image paths relative to the spec).
+    metrics
+        The summary metrics of the manifest.
+    units
+        Variable -> units.
+    """
+
+    index: int
+    stages: tuple[int, ...]
+    arrays: dict[str, np.ndarray]
+    values: dict[str, Any]
+    metrics: dict[str, float]
+    units: dict[str, str] = field(default_factory=dict)
+
+
+def iter_samples(
+    folder: str | Path,
+    *,
+    variables: Sequence[str] | None = None,
+    only: Sequence[int] | None = None,
+    incomplete: bool = False,
+) -> Iterator[Sample]:
+    """Yield the samples of a dataset one at a time as numpy arrays (no xarray needed).
+
+    Parameters
+    ----------
+    folder
+        The dataset folder.
+    variables
+        Variables to read (default: all).
+    only
+        Sample indices to read (default: every complete sample, in order).
+    incomplete
+        Allow an incomplete dataset (its complete samples are yielded).
+    """
+    import zarr
+
+    folder = Path(folder)
+    info, done = _selection(folder, incomplete, only)
+    schema = info["schema"]["variables"]
+    names = list(schema) if variables is None else list(variables)
+    unknown = [v for v in names if v not in schema]
+    if unknown:
+        raise BenchSimError(
+            f"variables = {names}: {unknown[0]!r} is not in the dataset ({', '.join(schema)})"
+        )
+    group = zarr.open_group(str(folder / DATA_STORE), mode="r")
+    records = read_records(folder)
+    stages = tuple(int(m) for m in info["stages"])
+    units = {v: schema[v]["units"] for v in names}
+    for i in done:
+        rec = records[i]
+        arrays = {v: np.asarray(group[v][i]) for v in names}
+        yield Sample(i, stages, arrays, dict(rec.get("values", {})), dict(rec.get("metrics", {})), units)
+
