@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup reproduce test install-check lint bench clean
+.PHONY: setup reproduce sweep-example test install-check lint bench clean
 
 .setup-stamp: pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -13,6 +13,11 @@ setup: .setup-stamp
 
 reproduce: setup
 	$(VENV)/bin/bench-sim reproduce
+
+# The committed example sweep (README): spot/fill ratio x output word, results/sweeps/light_ratio_beta
+sweep-example: setup
+	rm -rf results/sweeps/light_ratio_beta
+	$(VENV)/bin/bench-sim sweep scenes/sweeps/light_ratio_beta.toml --out results/sweeps/light_ratio_beta
 
 test: setup
 	$(VENV)/bin/ruff check bench_sim tests benchmarks
@@ -28,6 +33,7 @@ bench: setup
 	$(PY) benchmarks/bench_sensor.py
 	$(PY) benchmarks/bench_fusion.py
 	$(PY) benchmarks/bench_reproduce.py
+	$(PY) benchmarks/bench_sweep.py
 	$(PY) benchmarks/bench_resources.py
 
 clean:

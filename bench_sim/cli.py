@@ -410,6 +410,31 @@ def dataset(
         raise typer.Exit(1)
 
 
+@app.command()
+@_user_errors
+def sweep(
+    spec: Annotated[Path, typer.Argument(help="sweep spec (TOML): base config, [[parameters]], mode, seed")],
+    out: Annotated[Path, typer.Option("--out", help="output folder")],
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", help="worker processes of a local Dask cluster (default: the cores; 0: "
+                     "run in this process)"),
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option("--scheduler", help="address of a running Dask scheduler, tcp://HOST:PORT")
+    ] = None,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="finish a killed sweep: skip its finished points")
+    ] = False,
+    plots: Annotated[bool, typer.Option("--plots/--no-plots", help="draw DIR/plots/")] = True,
+) -> None:
+    """Scenario study: one simulation pass per point of a parameter sweep, on Dask:
+    DIR/points.csv, sweep.nc, plots/, sweep.json, report.md."""
+    from bench_sim.experiments.sweep import run_sweep
+
+    run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, plots=plots)
+
+
 def main() -> None:  # pragma: no cover
     """Run the command line (the ``bench-sim`` script is :func:`bench_sim.__main__.main`)."""
     app()

@@ -9,13 +9,14 @@ Errors are raised as :class:`ConfigError` with one line naming the file, the key
 what is allowed. Every float of every section must be finite (``inf``/``nan`` are refused by the
 base section model, so sections added later are covered too); combinations the physics cannot
 mean are refused (:meth:`BenchConfig._cross`), and odd-but-legal ones are reported by
-:func:`config_warnings` (issued as :class:`~bench_sim.errors.ConfigWarning` when a config is
-loaded), with the numbers.
+:func:`config_warnings` (issued as :class:`~bench_sim.errors.ConfigWarning` when a user's config
+is loaded: :func:`load_config`, :func:`warn_config`), with the numbers.
 """
 
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 import warnings
 from pathlib import Path
@@ -32,7 +33,13 @@ __all__ = [
     "TargetConfig",
     "SpotLightConfig",
     "FillLightConfig",
+    "DirectionalLightConfig",
+    "PointLightConfig",
+    "AreaLightConfig",
+    "LightConfig",
     "LightsConfig",
+    "LIGHT_KINDS",
+    "FLICKER_WAVEFORMS",
     "SensorConfig",
     "TimingConfig",
     "DTDIConfig",
@@ -51,6 +58,7 @@ __all__ = [
     "config_sha256",
     "config_to_toml_text",
     "config_warnings",
+    "warn_config",
 ]
 
 #: The scenes shipped inside the package (``scenes/`` in a source checkout links here).
@@ -75,6 +83,25 @@ TRA_METHODS: dict[str, str] = {
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 Fraction = Annotated[float, Field(ge=0, le=1)]
+
+#: Kinds of light (``lights.<name>.kind``) and what ``irradiance_w_m2`` means for each.
+LIGHT_KINDS: dict[str, str] = {
+    "spot": "on a plane normal to the beam at aim_m (intensity = E d^2 inside the cone)",
+    "fill": "on an unoccluded surface from a uniform environment (radiance = E / pi)",
+    "directional": "on a plane normal to direction, everywhere (a light at infinity)",
+    "point": "on a plane normal to the ray at reference_m (intensity = E d^2)",
+    "area": "on a plane facing the emitter at aim_m, on its axis (Lambertian rectangle of size_m)",
+}
+#: Waveforms of a light's temporal modulation (``flicker_waveform``), as relative intensity
+#: ``w(t)`` of mean 1 (see :mod:`bench_sim.rig.lights`).
+FLICKER_WAVEFORMS: dict[str, str] = {
+    "sine": "w = 1 + depth * sin(2 pi f t + phase)",
+    "rectified_sine": "w = 1 - depth + depth * (pi / 2) * |sin(pi f t + phase / 2)| (a lamp on "
+    "mains of frequency f / 2)",
+}
+#: Names a light cannot take (other objects of the Mitsuba scene).
+RESERVED_LIGHT_NAMES = ("integrator", "sensor", "drum", "drum_body", "drum_caps", "axle", "mounts", "bench")
+_LIGHT_NAME = re.compile(r"[a-z][a-z0-9_]*")
 
 
 class ConfigError(BenchSimError):
@@ -241,52 +268,218 @@ class TargetConfig(_Section):
         return self
 
 
-class SpotLightConfig(_Section):
-    """The strong light: a spot, aimed at a point of the drum surface.
+Vec3 = tuple[float, float, float]
+
+
+class _LightBase(_Section):
+    """What every light has: a switch, a physical level, a spectrum and a temporal modulation.
+
+    ``irradiance_w_m2`` is the in-band irradiance [W/m^2] at the light's reference point (what
+    that means per kind: :data:`LIGHT_KINDS`); the scene is linear in it. The light's relative
+    intensity in time is ``w(t)`` of mean 1 (:data:`FLICKER_WAVEFORMS`), steady when
+    ``flicker_hz = 0`` or ``flicker_depth = 0``; each frame integrates it over its own window
+    (:func:`bench_sim.rig.lights.frame_weights`).
+    """
+
+    enabled: bool = True
+    irradiance_w_m2: Annotated[float, Field(ge=0)] = 1.0
+    spectrum: Literal["flat", "blackbody"] = Field("flat", description="spectral mode only")
+    temperature_k: Annotated[float, Field(ge=500, le=20000)] = 3200.0
+    flicker_hz: Annotated[float, Field(ge=0, le=1e9)] = Field(
+        0.0, description="frequency of the intensity modulation [Hz]; 0: steady (100/120 Hz: a lamp "
+        "on 50/60 Hz mains)"
+    )
+    flicker_depth: Fraction = Field(
+        1.0, description="modulation depth: at its troughs the intensity falls to 1 - depth of its "
+        "mean (1: to zero); 0: steady"
+    )
+    flicker_waveform: Literal[tuple(FLICKER_WAVEFORMS)] = "sine"  # type: ignore[valid-type]
+    flicker_phase_rad: Annotated[float, Field(ge=-1e6, le=1e6)] = Field(
+        0.0, description="phase of the modulation at t = 0 (start of frame 0) [rad of its period]"
+    )
+
+    @property
+    def flickers(self) -> bool:
+        """True when the light's intensity changes in time."""
+        return self.flicker_hz > 0 and self.flicker_depth > 0
+
+    @property
+    def emits(self) -> bool:
+        """True when the light is switched on with a non-zero level."""
+        return self.enabled and self.irradiance_w_m2 > 0
+
+
+class SpotLightConfig(_LightBase):
+    """A spot, aimed at a point of the drum surface (the default ``strong`` light).
 
     ``irradiance_w_m2`` is the in-band irradiance on a plane normal to the beam at the aim point,
     so the spot's intensity is ``irradiance_w_m2 * d**2`` [W/sr] with ``d`` the distance to it.
     """
 
-    enabled: bool = True
+    kind: Literal["spot"] = "spot"
     irradiance_w_m2: Annotated[float, Field(ge=0)] = 128.0
-    position_m: tuple[float, float, float] = (-0.10, 0.25, 0.45)
-    aim_m: tuple[float, float, float] = (-0.0155, 0.0, 0.10)
+    position_m: Vec3 = (-0.10, 0.25, 0.45)
+    aim_m: Vec3 = (-0.0155, 0.0, 0.10)
     cutoff_deg: Annotated[float, Field(gt=0, le=90)] = 2.0
     beam_width_deg: Annotated[float, Field(gt=0, le=90)] = 1.9
-    spectrum: Literal["flat", "blackbody"] = Field("flat", description="spectral mode only")
-    temperature_k: Annotated[float, Field(ge=500, le=20000)] = 3200.0
 
     @model_validator(mode="after")
     def _beam(self) -> SpotLightConfig:
-        if math.dist(self.position_m, self.aim_m) < 1e-6:
-            raise ValueError(
-                f"position_m = {list(self.position_m)} is at aim_m: the spot has no direction; "
-                "place it away from the point it aims at"
-            )
         if self.beam_width_deg > self.cutoff_deg:
             raise ValueError(
                 f"beam_width_deg = {self.beam_width_deg} must not exceed cutoff_deg = "
                 f"{self.cutoff_deg}"
             )
+        if self.position_m == self.aim_m:
+            raise ValueError(
+                f"position_m = aim_m = {list(self.aim_m)}: a spot must not sit on its aim point"
+            )
         return self
 
 
-class FillLightConfig(_Section):
-    """The weak light: a uniform diffuse fill (constant environment).
+class FillLightConfig(_LightBase):
+    """A uniform diffuse fill: a constant environment (the default ``weak`` light; at most one
+    fill emits in a bench).
 
     ``irradiance_w_m2`` is the in-band irradiance on an unoccluded surface (``pi * L``).
     """
 
-    enabled: bool = True
+    kind: Literal["fill"] = "fill"
     irradiance_w_m2: Annotated[float, Field(ge=0)] = 6.0
-    spectrum: Literal["flat", "blackbody"] = Field("flat", description="spectral mode only")
     temperature_k: Annotated[float, Field(ge=500, le=20000)] = 6500.0
 
 
+class DirectionalLightConfig(_LightBase):
+    """A light at infinity (sun-like): parallel rays travelling along ``direction``.
+
+    ``irradiance_w_m2`` is the in-band irradiance on a plane normal to ``direction``, the same
+    everywhere (no reference point is needed).
+    """
+
+    kind: Literal["directional"] = "directional"
+    direction: Vec3 = Field(
+        (0.0, -0.5, -1.0), description="direction the light travels in (need not be normalised)"
+    )
+
+    @model_validator(mode="after")
+    def _direction(self) -> DirectionalLightConfig:
+        if not any(self.direction):
+            raise ValueError("direction = [0, 0, 0]: needs a non-zero vector (the way the light travels)")
+        return self
+
+
+class PointLightConfig(_LightBase):
+    """An isotropic point light at ``position_m``.
+
+    ``irradiance_w_m2`` is the in-band irradiance on a plane normal to the ray at
+    ``reference_m`` (default: the drum point the default camera looks at), so the intensity is
+    ``irradiance_w_m2 * d**2`` [W/sr] with ``d`` the distance between the two.
+    """
+
+    kind: Literal["point"] = "point"
+    position_m: Vec3 = (0.0, 0.15, 0.40)
+    reference_m: Vec3 = (0.0, 0.0, 0.10)
+
+    @model_validator(mode="after")
+    def _points(self) -> PointLightConfig:
+        if self.position_m == self.reference_m:
+            raise ValueError(
+                f"position_m = reference_m = {list(self.reference_m)}: the reference point must lie "
+                "away from the light"
+            )
+        return self
+
+
+class AreaLightConfig(_LightBase):
+    """A Lambertian emitting rectangle (a diffuser panel, a soft box) centred at ``position_m``
+    and facing ``aim_m``; black on its back.
+
+    ``irradiance_w_m2`` is the in-band irradiance at ``aim_m`` on a plane parallel to the
+    rectangle (the aim lies on its axis); the radiance follows in closed form
+    (:func:`bench_sim.rig.scene.area_radiance_w_m2_sr`).
+    """
+
+    kind: Literal["area"] = "area"
+    position_m: Vec3 = (0.0, 0.20, 0.45)
+    aim_m: Vec3 = (0.0, 0.0, 0.10)
+    size_m: tuple[PositiveFloat, PositiveFloat] = Field(
+        (0.10, 0.10), description="width and height of the rectangle [m]"
+    )
+
+    @model_validator(mode="after")
+    def _points(self) -> AreaLightConfig:
+        if self.position_m == self.aim_m:
+            raise ValueError(
+                f"position_m = aim_m = {list(self.aim_m)}: the panel must not sit on its aim point"
+            )
+        return self
+
+
+LightConfig = SpotLightConfig | FillLightConfig | DirectionalLightConfig | PointLightConfig | AreaLightConfig
+_AnyLight = Annotated[LightConfig, Field(discriminator="kind")]
+
+
 class LightsConfig(_Section):
+    """The bench's lights: ``[lights.<name>]`` tables.
+
+    ``strong`` (a spot) and ``weak`` (a fill) are always defined (the paper rig; switch one off
+    with ``enabled = false``); any other name adds a light of the ``kind`` it names
+    (:data:`LIGHT_KINDS`). Names are lower-case identifiers; at most one fill emits (Mitsuba has
+    one environment). :meth:`items` lists them in a fixed order: ``strong``, ``weak``, then the
+    others by name.
+    """
+
+    model_config = ConfigDict(extra="allow", frozen=True, validate_default=True)
+    __pydantic_extra__: dict[str, _AnyLight] = Field(init=False)  # type: ignore[assignment]
+
     strong: SpotLightConfig = SpotLightConfig()
     weak: FillLightConfig = FillLightConfig()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _names_and_kinds(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        for name, table in data.items():
+            if name in ("strong", "weak"):
+                continue
+            if not isinstance(name, str) or not _LIGHT_NAME.fullmatch(name) or name in RESERVED_LIGHT_NAMES:
+                raise ValueError(
+                    f"light name {name!r}: use a lower-case identifier (letters, digits, _) other "
+                    f"than {', '.join(RESERVED_LIGHT_NAMES)}"
+                )
+            if not isinstance(table, dict):
+                raise ValueError(f"{name} = {table!r}: must be a table ([lights.{name}])")
+            kind = table.get("kind")
+            if kind not in LIGHT_KINDS:
+                said = "no kind" if kind is None else f"kind = {kind!r}"
+                raise ValueError(
+                    f"{name}: {said}; a light needs kind = one of {', '.join(repr(k) for k in LIGHT_KINDS)}"
+                )
+        return data
+
+    @model_validator(mode="after")
+    def _one_fill(self) -> LightsConfig:
+        fills = [n for n, light in self.items() if light.kind == "fill" and light.emits]
+        if len(fills) > 1:
+            raise ValueError(
+                f"fill lights {fills} all emit: at most one fill may (one uniform environment); "
+                "switch the others off (enabled = false) or merge them"
+            )
+        return self
+
+    def items(self) -> list[tuple[str, LightConfig]]:
+        """``(name, light)`` of every light, enabled or not: ``strong``, ``weak``, then the
+        others sorted by name."""
+        extra = self.__pydantic_extra__ or {}
+        return [("strong", self.strong), ("weak", self.weak), *sorted(extra.items())]
+
+    def get(self, name: str) -> LightConfig:
+        """The light called ``name``; :class:`KeyError` if there is none."""
+        for n, light in self.items():
+            if n == name:
+                return light
+        raise KeyError(name)
 
 
 class SensorConfig(_Section):
@@ -491,14 +684,13 @@ class BenchConfig(_Section):
                 raise ValueError("sensor.qe_curve: relative QE values must lie in 0..1")
         if not math.isfinite(self.lens.magnification):
             raise ValueError("lens magnification is not finite")
-        spot = getattr(self.lights, "strong", None)
-        if spot is not None and spot.enabled and math.hypot(spot.position_m[1], spot.position_m[2]) <= (
-            self.drum.radius_m
-        ):
-            raise ValueError(
-                f"lights.strong.position_m = {list(spot.position_m)} lies inside the drum (drum.radius_m "
-                f"= {self.drum.radius_m} around the x axis): it could light nothing; move it outside"
-            )
+        for name, light in self.lights.items():
+            pos = getattr(light, "position_m", None)
+            if light.enabled and pos is not None and math.hypot(pos[1], pos[2]) <= self.drum.radius_m:
+                raise ValueError(
+                    f"lights.{name}.position_m = {list(pos)} lies inside the drum (drum.radius_m = "
+                    f"{self.drum.radius_m} around the x axis): it could light nothing; move it outside"
+                )
         from bench_sim.sensor.model import dark_electrons, pixel_saturation_electrons
 
         dark_e = dark_electrons(self.sensor, self.timing.t_int_s)
@@ -538,13 +730,13 @@ def config_warnings(cfg: BenchConfig) -> list[str]:
 
 
 def _format_loc(loc: tuple[int | str, ...]) -> str:
-    """``('lights', 'strong', 'position_m', 0)`` -> ``lights.strong.position_m[0]``."""
+    """``('lights', 'strong', 'spot', 'position_m', 0)`` -> ``lights.strong.position_m[0]``."""
+    parts = [p for p in loc if not (isinstance(p, str) and p.startswith("function-"))]
+    if len(parts) > 2 and parts[0] == "lights" and parts[2] in LIGHT_KINDS:
+        del parts[2]  # the union's tag (the light's kind) is not a key of the file
     out = ""
-    for p in loc:
-        if isinstance(p, int):
-            out += f"[{p}]"
-        elif not p.startswith("function-"):
-            out += f".{p}" if out else p
+    for p in parts:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else p)
     return out
 
 
@@ -626,10 +818,11 @@ def _read_toml(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
     return _deep_merge(base_data, data)
 
 
-def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> BenchConfig:
+def config_from_dict(data: dict[str, Any], source: str = "<dict>", *, warn: bool = False) -> BenchConfig:
     """Validate a plain dict (as parsed from TOML) into a :class:`BenchConfig`.
 
-    Each line of :func:`config_warnings` is issued as a :class:`~bench_sim.errors.ConfigWarning`.
+    With ``warn``, each line of :func:`config_warnings` is issued as a
+    :class:`~bench_sim.errors.ConfigWarning` (a user's config; not the configs the code derives).
     """
     if not isinstance(data, dict):
         raise ConfigError(f"config error: {source}: expected a table of settings, got {type(data).__name__}")
@@ -637,16 +830,24 @@ def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> BenchConfi
         cfg = BenchConfig.model_validate(data)
     except ValidationError as exc:
         raise ConfigError(_validation_message(exc, data, source)) from None
-    for line in config_warnings(cfg):
-        warnings.warn(f"{source}: {line}", ConfigWarning, stacklevel=2)
+    if warn:
+        warn_config(cfg, source)
     return cfg
 
 
+def warn_config(cfg: BenchConfig, source: str) -> None:
+    """Issue each line of :func:`config_warnings` as a :class:`~bench_sim.errors.ConfigWarning`
+    (``source``: the file or argument the config came from)."""
+    for line in config_warnings(cfg):
+        warnings.warn(f"{source}: {line}", ConfigWarning, stacklevel=3)
+
+
 def load_config(path: str | Path | None = None) -> BenchConfig:
-    """Load and validate a bench config from TOML (default: ``scenes/paper_rig.toml``)."""
+    """Load and validate a bench config from TOML (default: ``scenes/paper_rig.toml``); its odd
+    but legal settings are warned about (:func:`config_warnings`)."""
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     p = p.resolve()
-    return config_from_dict(_read_toml(p), source=str(p))
+    return config_from_dict(_read_toml(p), source=str(p), warn=True)
 
 
 def with_overrides(cfg: BenchConfig, overrides: dict[str, Any], source: str = "<overrides>") -> BenchConfig:

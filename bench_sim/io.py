@@ -18,9 +18,10 @@ Writing
 
 A write that fails for want of room or permission (``ENOSPC``, ``EDQUOT``, ``EFBIG``, ``EROFS``,
 ``EACCES``, and the C writers' own reports of them) becomes one :class:`OutputWriteError` line;
-the temporaries are removed first. Temporaries are named ``.NAME.partial-PID-XXXX`` and hold an
-``flock`` while their run lives: a killed run's temporaries (``SIGKILL`` leaves them) are removed
-by the next run writing there, and a set moved aside just before a kill is put back.
+the temporaries are removed first. Temporaries are named ``.NAME.partial-PID-XXXX``; a set's
+folder holds an ``flock`` while its run lives. A killed run's temporaries (``SIGKILL`` leaves
+them: unlocked, their process gone, or older than a minute with their process's number reused)
+are removed by the next run writing there, and a set moved aside just before a kill is put back.
 
 Fault injection (tests): ``BENCH_SIM_FAULT=KIND@POINT`` makes this process fail at ``POINT``:
 ``N`` (the N-th file written through :func:`atomic_path`, after its temporary file is written,
@@ -164,13 +165,14 @@ def _pid_alive(pid: int) -> bool:
 
 def _is_stale(path: Path, pid: int) -> bool:
     """Whether the temporary ``path`` of process ``pid`` was left by a dead run: nobody holds
-    its lock (and, if that process seems alive, the temporary is older than the grace time)."""
+    its lock (folders), and its process is gone or, if a process of that number lives, the
+    temporary is older than the grace time."""
     try:
         fd = os.open(path, os.O_RDONLY)
     except OSError:
         return False
     try:
-        if fcntl is not None:
+        if fcntl is not None and path.is_dir():  # a set's folder: its run holds the lock
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
@@ -289,9 +291,8 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
 
     The temporary file (``.NAME.partial-PID-XXXX.SUFFIX``) keeps the destination's suffix (some
-    writers choose the format from it) and is locked while this run lives. On any exception it
-    is removed and ``path`` is left untouched; a write failure (no room, no permission) becomes
-    an :class:`OutputWriteError`.
+    writers choose the format from it). On any exception it is removed and ``path`` is left
+    untouched; a write failure (no room, no permission) becomes an :class:`OutputWriteError`.
     """
     path = Path(path)
     try:
@@ -512,13 +513,14 @@ def output_files(
 
 @contextlib.contextmanager
 def _deferred_path(path: Path) -> Iterator[tuple[Path, Any]]:
-    """A locked temporary beside ``path`` and a function that renames it into place; removed on
-    exit unless committed."""
+    """A temporary beside ``path`` and a function that renames it into place; removed on exit
+    unless committed. Files are not locked (writers such as HDF5 lock the files they write, and
+    an flock held here would make them fail); a stale one is told by its dead process or age."""
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(path)
     prefix = f".{path.name}.partial-{os.getpid()}-"
     fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=path.suffix, dir=path.parent)
-    _lock(fd)
+    os.close(fd)
     tmp_path = Path(tmp)
 
     def commit() -> None:
@@ -530,7 +532,6 @@ def _deferred_path(path: Path) -> Iterator[tuple[Path, Any]]:
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
-        os.close(fd)
 
 
 def format_bytes(n: float) -> str:

@@ -147,7 +147,7 @@ BAD_CONFIGS: list[tuple[str, str, list[str]]] = [
     ("focus inside f", "[lens]\nfocus_distance_m = 0.01\n", ["focus_distance_m = 0.01"]),
     ("reflectance order", "[target]\nreflectance_min = 0.95\n", ["reflectance_min = 0.95"]),
     ("beam wider than cutoff", "[lights.strong]\nbeam_width_deg = 5.0\n", ["beam_width_deg = 5.0"]),
-    ("spot at its aim", "[lights.strong]\nposition_m = [-0.0155, 0.0, 0.1]\n", ["position_m", "direction"]),
+    ("spot at its aim", "[lights.strong]\nposition_m = [-0.0155, 0.0, 0.1]\n", ["position_m", "aim point"]),
     ("spot inside drum", "[lights.strong]\nposition_m = [0.0, 0.0, 0.05]\n", ["position_m", "inside the"]),
     ("pedestal fills word", "[dtdi]\npedestal_dn = 3000\n", ["pedestal_dn = 3000"]),
     ("t_int > period", "[timing]\nintegration_time_s = 1.0\n", ["integration_time_s = 1.0"]),

@@ -62,19 +62,24 @@ def test_base_chain_overrides(tmp_path):
         ({"beta_bits": 8}, True),
     ],
 )
-def test_a_word_narrower_than_one_pixel_is_warned_about_with_the_numbers(dtdi, warns):
+def test_a_word_narrower_than_one_pixel_is_warned_about_with_the_numbers(tmp_path, dtdi, warns):
     import warnings
 
     from bench_sim.config import config_warnings, with_overrides
     from bench_sim.errors import ConfigWarning
 
+    path = tmp_path / "b.toml"
+    path.write_text(f"base = '{DEFAULT_CONFIG_PATH}'\n[dtdi]\n" + "".join(
+        f"{k} = {str(v).lower()}\n" for k, v in dtdi.items()
+    ))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        cfg = with_overrides(load_config(), {"dtdi": dtdi})
+        cfg = load_config(path)
+        with_overrides(cfg, {"lines": 8})  # configs derived in code are not warned about again
     lines = config_warnings(cfg)
     assert len(lines) == int(warns)
     issued = [str(w.message) for w in caught if w.category is ConfigWarning]
-    assert issued == [f"<overrides>: {ln}" for ln in lines]
+    assert issued == [f"{path}: {ln}" for ln in lines]
     if warns:
         room = 2 ** dtdi["beta_bits"] - 1 - dtdi.get("pedestal_dn", 64)
         assert f"beta_bits = {dtdi['beta_bits']}: the word holds {room} DN" in lines[0]

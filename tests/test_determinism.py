@@ -1,6 +1,6 @@
 """Same config and seed, byte-identical data files: wall-clock times live only in the documented
-timing fields (``meta.json``'s ``wall_s`` of ``render``; ``metrics.json``'s ``wall_s`` and
-``timings_s`` and the report of ``reproduce``, tested in ``test_reproduce.py``)."""
+timing fields (``meta.json``'s ``wall_s`` and ``mitsuba_renders`` of ``render``; ``metrics.json``'s
+``wall_s`` and ``timings_s`` and the report of ``reproduce``, tested in ``test_reproduce.py``)."""
 
 from __future__ import annotations
 
@@ -21,8 +21,8 @@ TINY = (
     "[sensor]\nrows = 12\ncolumns = 48\n[target]\npanel_lines = 96\npanel_columns = 48\n"
     "[render]\nspp = 4\n[fusion]\nmu1 = 2\nmu2 = 8\n"
 )
-#: fields that hold wall-clock times, by file name
-TIMING_FIELDS = {"meta.json": ("wall_s",)}
+#: fields that hold the run's own figures (wall-clock time, renders made), by file name
+TIMING_FIELDS = {"meta.json": ("wall_s", "mitsuba_renders")}
 
 
 def _files(folder: Path) -> dict[str, bytes]:

@@ -27,6 +27,7 @@ import logging
 import os
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -176,15 +177,19 @@ def open_client(
     n = default_workers() if workers is None else int(workers)
     if n < 0:
         raise BenchSimError(f"--workers = {n}: must be >= 0 (0 runs in this process)")
-    cluster = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        silence_logs=logging.ERROR,
-        # one core per worker: the chain's own thread pools use one thread in a worker
-        env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
-    )
+    with warnings.catch_warnings():
+        # the scheduler's HTTP endpoints fall back to a free port when 8787 is taken (another
+        # cluster on the machine): nothing the user needs to act on
+        warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+            # one core per worker: the chain's own thread pools use one thread in a worker
+            env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
+        )
     client = Client(cluster)
     try:
         yield client

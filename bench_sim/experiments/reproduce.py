@@ -24,7 +24,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, with_overrides
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.provenance import provenance
+from bench_sim.experiments.provenance import provenance, render_provenance
 
 __all__ = ["run_reproduce", "check_reproducible", "quick_config", "PAPER", "FIG3_STAGES", "QUICK_OVERRIDES"]
 
@@ -37,10 +37,6 @@ PAPER = {
     "mu1": 10,
     "mu2": 80,
 }
-
-#: SNR below which a patch counts as "in the noise", and the Rose criterion for "out of it"
-SNR_IN_NOISE = 2.0
-SNR_ROSE = 3.0
 
 #: Width of the whole-chain DR measurement's images [columns] (narrower sensors: their width).
 CHAIN_DR_COLUMNS = 64
@@ -67,20 +63,6 @@ class _Timer:
 
     def add(self, name: str, seconds: float) -> None:
         self.steps[name] = self.steps.get(name, 0.0) + seconds
-
-
-def _patch_slices(panel: Any, geom: Any, cfg: BenchConfig, lines: int) -> dict[str, tuple[slice, slice]]:
-    """Patch name -> (line slice, column slice) in the output images."""
-    scale = geom.object_pixel_m / geom.delta_m  # panel pixels -> lines (1 in sync)
-    n = cfg.sensor.columns
-    off = n / 2.0 - cfg.target.panel_columns / 2.0 - 0.5  # column = v + off
-    out = {}
-    for p in panel.patches:
-        l0, l1 = math.ceil(p.u0 * scale), math.floor(p.u1 * scale)
-        c0, c1 = math.ceil(p.v0 + off), math.floor(p.v1 + off)
-        if 0 <= l0 < l1 <= lines and 0 <= c0 < c1 <= n:
-            out[p.name] = (slice(l0, l1), slice(c0, c1))
-    return out
 
 
 def _box(panel: Any, cfg: BenchConfig, name: str, half: str, lines: int) -> tuple[int, int, int, int]:
@@ -110,6 +92,7 @@ def check_reproducible(cfg: BenchConfig) -> None:
     ``sensor.columns`` image, stage words that fit its 16-bit TIFF files, and a word wide
     enough for the whole-chain DR measurement's pedestal. Raises :class:`BenchSimError` (one
     line) naming what to change."""
+    from bench_sim.experiments.pass_metrics import patch_slices
     from bench_sim.rig.geometry import rig_geometry
     from bench_sim.rig.target import make_panel
 
@@ -131,7 +114,7 @@ def check_reproducible(cfg: BenchConfig) -> None:
     geom = rig_geometry(cfg)
     panel = make_panel(t, 2 * math.pi * geom.radius_m / geom.object_pixel_m)
     lines, cols = cfg.lines, cfg.sensor.columns
-    patches = _patch_slices(panel, geom, cfg, lines)
+    patches = patch_slices(panel, geom, cfg, lines)
     dark, bright = _inset_boxes(panel, cfg, lines)
     halves = all(any(k.startswith(f"wedge_{h}") for k in patches) for h in ("left", "right"))
     if halves and all(b[1] - b[0] >= 2 and b[3] - b[2] >= 2 for b in (dark, bright)):
@@ -179,23 +162,17 @@ def _check_dr_measurable(cfg: BenchConfig, pedestal_dn: float) -> None:
             )
 
 
-def _spatial_snr(img: np.ndarray, sl: tuple[slice, slice]) -> float:
-    region = np.asarray(img[sl], dtype=np.float64)
-    sd = float(region.std())
-    return float(region.mean() / sd) if sd > 0 else float("inf")
-
-
 def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False) -> dict[str, Any]:
     """Run the reproduction and write its outputs into ``out``. Returns ``metrics.json``'s dict."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from bench_sim.experiments.chain_dr import measure_chain_dynamic_range
+    from bench_sim.experiments.pass_metrics import pass_metrics
     from bench_sim.experiments.preflight import check_seed, preflight
     from bench_sim.experiments.simulate import run_pass
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
     from bench_sim.fusion.tonemap import quantize_display, tone_map
     from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
-    from bench_sim.metrics.histogram import evaluate_eq18
     from bench_sim.resources import estimate_reproduce
     from bench_sim.sensor.model import stage_offset_dn
 
@@ -233,9 +210,8 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     setup, stage_images = sim.setup, sim.stage_dn
     g1, g2 = stage_images[mu1], stage_images[mu2]
     # the stage words carry the pedestal (dtdi.pedestal_dn, + m*black unless subtracted): every
-    # consumer subtracts it; s1, s2 are the stage signals [DN]
+    # consumer subtracts it
     off1, off2 = (stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2))
-    s1, s2 = g1 - off1, g2 - off2
 
     # 3. fusion and display transform
     t0 = time.perf_counter()
@@ -246,59 +222,22 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
 
     # 4. metrics
     t0 = time.perf_counter()
-    # eq. 16-17 count the values of the stored words; the HDR carries Gamma2's offset likewise
-    eq18 = evaluate_eq18(g1, g2, fused.hdr + off2, mu1=mu1, mu2=mu2, beta=beta)
-    clip = 2**beta - 1
     dr_size = {"columns": min(CHAIN_DR_COLUMNS, cfg.sensor.columns)}
     chain_dr = measure_chain_dynamic_range(cfg, rng, **dr_size, **({"n_levels": 24} if quick else {}))
     dr = chain_dr.as_dict()
     panel = setup.grid.panel
-    patches = _patch_slices(panel, setup.geom, cfg, lines)
-    right = {k: v for k, v in patches.items() if k.startswith("wedge_right")}
-    left = {k: v for k, v in patches.items() if k.startswith("wedge_left")}
-    refl = {p.name: p.reflectance for p in panel.patches}
-    darkest = min(right, key=refl.__getitem__)
-    brightest = max(left, key=refl.__getitem__)
-    images = {"gamma1": s1, "gamma2": s2, "gamma_hdr": fused.hdr}
-    snr_dark = {k: _spatial_snr(v, right[darkest]) for k, v in images.items()}
-    sat = {
-        "gamma1": float(np.mean(g1 >= clip)),
-        "gamma2": float(np.mean(g2 >= clip)),
-        "gamma_hdr": float(np.mean(fused.saturated)),
-    }
-    bsl = left[brightest]
-    bright = {
-        "patch": brightest,
-        "reflectance": refl[brightest],
-        "gamma1_mean_dn": float(s1[bsl].mean()),
-        "gamma1_fraction_of_phi_fs": float(s1[bsl].mean() / 2**beta),
-        "gamma2_saturated_fraction": float(np.mean(g2[bsl] >= clip)),
-        "gamma_hdr_saturated_fraction": float(np.mean(fused.saturated[bsl])),
-    }
-    dark = {
-        "patch": darkest,
-        "reflectance": refl[darkest],
-        "snr": snr_dark,
-        # pixels of the patch stored as 0 DN (clipped by the word): 0 with a pedestal above the noise
-        "word_zero_fraction": {
-            k: float(np.mean(v[right[darkest]] <= 0)) for k, v in (("gamma1", g1), ("gamma2", g2))
-        },
-    }
-    # "in the noise": below SNR 2; "out of the noise": the Rose criterion, SNR >= 3
-    qualitative = {
-        "stage_mu2_saturates_bright_region": bright["gamma2_saturated_fraction"] > 0.99,
-        "stage_mu1_leaves_darkest_patch_in_noise": snr_dark["gamma1"] < SNR_IN_NOISE,
-        "hdr_keeps_bright_unsaturated": bright["gamma_hdr_saturated_fraction"] == 0.0,
-        "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
-        and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
-    }
+    pm = pass_metrics(cfg, sim, fused)
+    eq18, sat, dark, bright, qualitative = (
+        pm.eq18, pm.saturated_fraction, pm.darkest_patch, pm.brightest_patch, pm.qualitative
+    )
     eq15 = dr_increase_eq15_db(mu1, mu2)
     pairs = stage_pairs_for_db(PAPER["delta_psi_db"], FIG3_STAGES)
     timer.add("metrics", time.perf_counter() - t0)
 
     # 5. outputs
     t0 = time.perf_counter()
-    meta = provenance(cfg, seed, quick=quick, render=setup.info, backend=setup.backend.as_dict())
+    meta = provenance(cfg, seed, quick=quick, render=render_provenance(setup.info),
+                      backend=setup.backend.as_dict())
     metrics: dict[str, Any] = {
         "mu1": mu1,
         "mu2": mu2,

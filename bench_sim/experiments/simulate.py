@@ -66,7 +66,7 @@ VARIABLES: dict[str, tuple[str, str]] = {
 def resolve_config(config: BenchConfig | str | Path | Mapping[str, Any] | None) -> BenchConfig:
     """A :class:`BenchConfig` from a config, a TOML path, or a dict of overrides on the default
     rig (``None``: the default rig)."""
-    from bench_sim.config import load_config, with_overrides
+    from bench_sim.config import load_config, warn_config, with_overrides
 
     if config is None:
         return load_config()
@@ -75,7 +75,9 @@ def resolve_config(config: BenchConfig | str | Path | Mapping[str, Any] | None) 
     if isinstance(config, str | Path):
         return load_config(config)
     if isinstance(config, Mapping):
-        return with_overrides(load_config(), dict(config), source="simulate(config=...)")
+        cfg = with_overrides(load_config(), dict(config), source="simulate(config=...)")
+        warn_config(cfg, "simulate(config=...)")
+        return cfg
     raise BenchSimError(
         f"config = {type(config).__name__}: expected a BenchConfig, a TOML path or a dict of overrides"
     )

@@ -6,15 +6,21 @@
 
 ``fast``
     The factorised engine. With a Lambertian print, direct light only and static lights, the
-    radiance a camera sample sees is ``S0 + albedo(y_material, x) * D``, where ``D`` is what the
-    sample sees on a drum of albedo 1 minus what it sees on a drum of albedo 0 (``S0``: light from
-    everything that is not the drum). Mitsuba renders ``S0``, ``D`` and the hit position once at
-    ``subpixels x subpixels`` records per pixel. Each record's bilinear weights on the
-    motion-aligned texture grid (:mod:`bench_sim.render.texture`) are summed into a small kernel
-    per pixel; since one line period moves the material by exactly ``q`` texels, frame ``k`` is
-    the same kernels applied ``k * q`` texels further along -- strided array slices, no lookups.
-    Smear is a box filter of the texture along the track (exact for the linear interpolant).
-    Configs where the factorisation is not exact (glossy print, indirect light) are refused.
+    radiance a camera sample sees under light ``l`` alone is ``S0_l + albedo(y_material, x) *
+    D_l``, where ``D_l`` is what the sample sees on a drum of albedo 1 minus what it sees on a
+    drum of albedo 0 (``S0_l``: light from everything that is not the drum's print). The scene is
+    linear in each light, so a frame is ``sum_l w_l(k) (S0_l + albedo * D_l)`` with ``w_l(k)``
+    the light's power and relative intensity in frame ``k`` (steady lights: constant; flicker:
+    :func:`bench_sim.rig.lights.frame_weights`). Mitsuba renders the hit positions once and
+    ``S0_l``, ``D_l`` once per light at ``subpixels x subpixels`` records per pixel, at a
+    reference power, and the records are cached per process (:mod:`bench_sim.render.records`):
+    changing a light's power or flicker, the target, the sensor or DTDI re-renders nothing. Each
+    record's bilinear weights on the motion-aligned texture grid (:mod:`bench_sim.render.texture`)
+    are summed into a small kernel per pixel and light; since one line period moves the material
+    by exactly ``q`` texels, frame ``k`` is the same kernels applied ``k * q`` texels further along
+    -- strided array slices, no lookups. Smear is a box filter of the texture along the track
+    (exact for the linear interpolant). Configs where the factorisation is not exact (glossy
+    print, indirect light) are refused.
 """
 
 from __future__ import annotations
@@ -26,20 +32,38 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.render.records import (
+    REFERENCE_IRRADIANCE_W_M2,
+    light_power_w_m2,
+    light_records,
+    render_array,
+)
 from bench_sim.render.texture import RunTexture, drum_texture, smear_filter
 from bench_sim.rig.geometry import RigGeometry
-from bench_sim.rig.scene import scene_dict
+from bench_sim.rig.lights import frame_weights
+from bench_sim.rig.scene import light_names, scene_dict
 
 __all__ = ["ReferenceEngine", "FastEngine", "check_fast_engine_valid"]
 
 
-def _render_array(mi: Any, scene: Any, spp: int, seed: int) -> np.ndarray:
-    img = mi.render(scene, spp=spp, seed=int(seed) & 0x7FFFFFFF)
-    return np.array(img, dtype=np.float32)
+#: The Mitsuba parameter holding each kind of light's emitted quantity (under the light's name).
+_EMISSION_PARAM = {
+    "spot": "intensity",
+    "point": "intensity",
+    "directional": "irradiance",
+    "fill": "radiance",
+    "area": "emitter.radiance",
+}
 
 
 class ReferenceEngine:
-    """Mitsuba renders every frame (see module docstring)."""
+    """Mitsuba renders every frame (see module docstring).
+
+    Lights that flicker are scaled per frame by their weight
+    (:func:`bench_sim.rig.lights.frame_weights`): each one's emission parameter is set to its
+    level times the weight as an *opaque* Dr.Jit value before the frame's render, so, like the
+    frame's start time, it changes no compiled kernel.
+    """
 
     name = "reference"
 
@@ -55,13 +79,38 @@ class ReferenceEngine:
             spectral=cfg.render.spectral,
         )
         self.scene = mi.load_dict(d)
+        self.renders = 0  # Mitsuba renders made by this engine
+        # flickering lights: parameter key -> its level at weight 1
+        self._params = mi.traverse(self.scene)
+        self._levels: dict[str, tuple[str, np.ndarray]] = {}
+        for name in light_names(cfg):
+            if cfg.lights.get(name).flickers:
+                stem = f"{name}.{_EMISSION_PARAM[cfg.lights.get(name).kind]}"
+                key = next(k for k in (f"{stem}.value", f"{stem}.values") if k in self._params)
+                self._levels[name] = (key, np.array(self._params[key], dtype=np.float64))
+
+    def _set_weights(self, weights: dict[str, float]) -> None:
+        import drjit as dr
+
+        for name, (key, level) in self._levels.items():
+            value, cls = level * weights[name], type(self._params[key])
+            # an array from memory (spectral values) or an opaque scalar: never a literal
+            if value.size > 1:
+                self._params[key] = cls(value.astype(np.float32))
+            else:
+                self._params[key] = dr.opaque(cls, float(value[0]))
+        self._params.update()
 
     def radiance_frames(self, k0: int, k1: int) -> np.ndarray:
         """Radiance [W m^-2 sr^-1], shape (k1 - k0, rows, columns), float32."""
         out = np.empty((k1 - k0, self.cfg.sensor.rows, self.cfg.sensor.columns), dtype=np.float32)
+        weights = {name: frame_weights(self.cfg, name, k0, k1) for name in self._levels}
         for k in range(k0, k1):
             self.texture.set_frame_start(k * self.geom.line_period_s)
-            img = _render_array(self.mi, self.scene, self.spp, self.seed * 1_000_003 + k)
+            if weights:
+                self._set_weights({name: float(w[k - k0]) for name, w in weights.items()})
+            img = render_array(self.mi, self.scene, self.spp, self.seed * 1_000_003 + k)
+            self.renders += 1
             out[k - k0] = img[..., 0]
         return out
 
@@ -82,116 +131,163 @@ def check_fast_engine_valid(cfg: BenchConfig) -> None:
 
 @dataclass(frozen=True)
 class _RowKernel:
-    base_y: int  # texel row of tap 0 at frame 0
-    base_x: int  # texel column of tap 0 for column 0
-    weights: np.ndarray  # (taps_y, taps_x, columns) float32, radiance per unit albedo
+    """One sensor row's kernels: tap ``(a, b)`` of column ``n`` weighs texel row
+    ``base_y + a + k q`` (absolute, frame ``k``) and texel column ``base_x + b + n q``."""
+
+    base_y: int  # absolute texel row (y = index * h_y) of tap 0 at frame 0
+    base_x: int  # texel column of tap 0 for column 0 (run texture grid)
+    weights: np.ndarray  # (lights, taps_y, taps_x, columns) float32, radiance per unit albedo
 
 
 class FastEngine:
-    """The factorised engine (see module docstring)."""
+    """The factorised engine, linear in each light (see module docstring).
+
+    A frame is ``sum_l w_l(k) * (S0_l + kernels_l applied to the smeared texture)``, where the
+    records of light ``l`` (:mod:`bench_sim.render.records`, rendered once per process at a
+    reference power) are scaled by the light's configured power and ``w_l(k)`` is its mean
+    relative intensity over frame ``k`` (:func:`bench_sim.rig.lights.frame_weights`): a change
+    of power or flicker needs no render. Lights whose weight is the same over a chunk of frames
+    are applied as one combined kernel.
+    """
 
     name = "fast"
 
     def __init__(
-        self, mi: Any, cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, seed: int, first_frame: int = 0
+        self, mi: Any, cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, seed: int, first_frame: int = 0,
+        *, variant: str | None = None,
     ) -> None:
+        """``seed`` is not used: the records are rendered with
+        :data:`bench_sim.render.records.RECORD_SEED` (see :mod:`bench_sim.render.records`)."""
         check_fast_engine_valid(cfg)
         self.cfg, self.geom, self.grid = cfg, geom, grid
         self.first_frame = int(first_frame)
-        M, N, ss = cfg.sensor.rows, cfg.sensor.columns, cfg.render.subpixels
-        spp = cfg.render.spp
-
-        spectral = cfg.render.spectral
-
-        def records(albedo: float, aov: bool) -> np.ndarray:
-            d = scene_dict(
-                mi, cfg, geom, {"type": "uniform", "value": albedo}, width=N * ss, height=M * ss,
-                spp=spp, aov_position=aov, spectral=spectral,
-            )
-            return _render_array(mi, mi.load_dict(d), spp, seed)
-
-        if spectral:
-            # radiance from the spectral film; hit positions (per record, averaged) from an aov
-            # render with an RGB film: the two cannot share one render in Mitsuba 3.9
-            pos = records(1.0, True)[..., -3:]
-            rec1 = np.concatenate([records(1.0, False)[..., :1], pos], axis=-1)
-        else:
-            rec1 = records(1.0, True)
-        if cfg.drum.geometry == "analytic":
-            # the drum is the only shape: a record either hit it (no light without its albedo)
-            # or missed everything (sees the fill, independent of the albedo)
-            miss = np.all(rec1[..., 1:4] == 0.0, axis=-1)
-            s0 = np.where(miss, rec1[..., 0], 0.0).astype(np.float32)
-        else:
-            s0 = records(0.0, not spectral)[..., 0]  # same seed, same rays: D is exact per record
-        self.static_radiance = s0.reshape(M, ss, N, ss).mean(axis=(1, 3))
-        self.kernels = self._kernels(rec1[..., 0] - s0, rec1[..., 1:4])
-        smeared = smear_filter(grid.values, grid.h_y_m, geom.smear_m)
-        q = grid.q
-        # phase planes: plane[a][b][r, c] = smeared[a + r q, b + c q] (contiguous slices)
-        self._planes = [
-            [np.ascontiguousarray(smeared[a::q, b::q]) for b in range(q)] for a in range(q)
+        self.records, self.rendered = light_records(mi, cfg, geom, variant or mi.variant())
+        self.renders = self.records.renders if self.rendered else 0
+        # the lights that emit in this bench and their power relative to the records'
+        emitting = light_names(cfg)
+        self._lights = [
+            (li, name, light_power_w_m2(cfg, name) / REFERENCE_IRRADIANCE_W_M2)
+            for li, name in enumerate(self.records.lights)
+            if name in emitting
         ]
+        self.kernels = self._cached_kernels()
+        self._combined: dict[tuple[float, ...], list[np.ndarray]] = {}
+        self._smeared = smear_filter(grid.values, grid.h_y_m, geom.smear_m)
 
-    def _kernels(self, d_rec: np.ndarray, pos: np.ndarray) -> list[_RowKernel]:
-        cfg, geom, grid = self.cfg, self.geom, self.grid
+    def _cached_kernels(self) -> list[_RowKernel]:
+        grid = self.grid
+        key = ("kernels", grid.q, grid.h_y_m, grid.h_x_m, grid.x_start_m, self.geom.y_offset_m,
+               self.geom.radius_m)
+        kern = self.records.derived.get(key)
+        if kern is None:
+            kern = self._kernels()
+            self.records.derived[key] = kern
+        return kern
+
+    def _kernels(self) -> list[_RowKernel]:
+        cfg, geom, grid, rec = self.cfg, self.geom, self.grid, self.records
         M, N, ss, q = cfg.sensor.rows, cfg.sensor.columns, cfg.render.subpixels, grid.q
+        n_lights = len(rec.lights)
+        pos = rec.position
         theta = np.arctan2(-pos[..., 1].astype(np.float64), pos[..., 2].astype(np.float64))
-        y0 = geom.y_material(theta, self.first_frame * geom.line_period_s)  # kernels at the first frame
-        fy = (y0 - grid.y_start_m) / grid.h_y_m
+        fy = geom.y_material(theta, 0.0) / grid.h_y_m  # absolute texel rows at frame 0
         fx = (pos[..., 0].astype(np.float64) - grid.x_start_m) / grid.h_x_m
         col = np.broadcast_to(np.arange(N * ss) // ss, fy.shape)
-        valid = d_rec != 0
+        valid = rec.hit & np.any(rec.d_rec != 0, axis=0)
         kernels = []
         for i in range(M):
             rows = slice(i * ss, (i + 1) * ss)
             v = valid[rows]
-            d = d_rec[rows].astype(np.float64) / (ss * ss)
-            qy = np.floor(fy[rows]).astype(np.int64)
-            ay = fy[rows] - qy
-            rel = np.floor(fx[rows]).astype(np.int64)
-            ax = fx[rows] - rel
-            rel = rel - col[rows] * q
             if not v.any():
-                kernels.append(_RowKernel(0, 0, np.zeros((1, 1, N), np.float32)))
+                kernels.append(_RowKernel(0, 0, np.zeros((n_lights, 1, 1, N), np.float32)))
                 continue
+            qy = np.floor(fy[rows]).astype(np.int64)
+            ay = (fy[rows] - qy)[v]
+            rel = np.floor(fx[rows]).astype(np.int64)
+            ax = (fx[rows] - rel)[v]
+            rel = rel - col[rows] * q
             by, bx = int(qy[v].min()), int(rel[v].min())
             ty, tx = int(qy[v].max()) - by + 2, int(rel[v].max()) - bx + 2
-            w = np.zeros(ty * tx * N, dtype=np.float64)
             qy_v, rel_v, c_v = qy[v] - by, rel[v] - bx, col[rows][v]
-            for dy, wy in ((0, 1.0 - ay[v]), (1, ay[v])):
-                for dx, wx in ((0, 1.0 - ax[v]), (1, ax[v])):
+            w = np.zeros((n_lights, ty * tx * N), dtype=np.float64)
+            for dy, wy in ((0, 1.0 - ay), (1, ay)):
+                for dx, wx in ((0, 1.0 - ax), (1, ax)):
                     flat = ((qy_v + dy) * tx + rel_v + dx) * N + c_v
-                    w += np.bincount(flat, weights=d[v] * wy * wx, minlength=w.size)
-            kernels.append(_RowKernel(by, bx, w.reshape(ty, tx, N).astype(np.float32)))
-        ny, nx = grid.shape
-        lo = min(k.base_y for k in kernels)
-        hi_x = max(k.base_x + k.weights.shape[1] + (N - 1) * q for k in kernels)
-        if lo < 0 or min(k.base_x for k in kernels) < 0 or hi_x > nx:
+                    for li in range(n_lights):
+                        d = rec.d_rec[li, rows][v].astype(np.float64) / (ss * ss)
+                        w[li] += np.bincount(flat, weights=d * wy * wx, minlength=w.shape[1])
+            kernels.append(_RowKernel(by, bx, w.reshape(n_lights, ty, tx, N).astype(np.float32)))
+        nx = grid.shape[1]
+        hi_x = max(k.base_x + k.weights.shape[2] + (N - 1) * q for k in kernels)
+        if min(k.base_x for k in kernels) < 0 or hi_x > nx:
             raise RuntimeError("fast engine: pixel footprints fall outside the run texture")
         return kernels
 
+    def light_coefficients(self, k0: int, k1: int) -> np.ndarray:
+        """(lights, k1 - k0) float64: each light's scale over frames ``k0 .. k1 - 1``: its power
+        relative to the records' times its mean relative intensity in each frame."""
+        out = np.zeros((len(self.records.lights), k1 - k0), dtype=np.float64)
+        for li, name, scale in self._lights:
+            out[li] = scale * frame_weights(self.cfg, name, k0, k1)
+        return out
+
+    def _combined_kernels(self, coeffs: tuple[float, ...]) -> list[np.ndarray]:
+        """Per row, the kernels of all lights weighted by ``coeffs`` and summed (cached)."""
+        got = self._combined.get(coeffs)
+        if got is None:
+            c = np.asarray(coeffs, dtype=np.float32)
+            got = [np.tensordot(c, k.weights, axes=1).astype(np.float32) for k in self.kernels]
+            self._combined = {coeffs: got}  # one set: steady lights keep their coefficients
+        return got
+
+    def _window(self, k0: int, k1: int) -> tuple[int, list[list[np.ndarray]]]:
+        """Phase planes of the smeared texture for frames ``k0 .. k1 - 1``: ``(w0, planes)``,
+        ``planes[a][b][r, c]`` = smeared grid texel ``(w0 + a + r q, b + c q)``."""
+        q, a0 = self.grid.q, self.grid.a0
+        lo = min(k.base_y for k in self.kernels) - a0 + k0 * q
+        hi = max(k.base_y + k.weights.shape[1] for k in self.kernels) - a0 + (k1 - 1) * q + 1
+        w0 = (lo // q) * q
+        if w0 < 0 or hi > self.grid.shape[0]:
+            raise RuntimeError("fast engine: frame outside the run texture")
+        win = self._smeared[w0:hi]
+        return w0, [[np.ascontiguousarray(win[a::q, b::q]) for b in range(q)] for a in range(q)]
+
     def radiance_frames(self, k0: int, k1: int) -> np.ndarray:
         """Radiance [W m^-2 sr^-1], shape (k1 - k0, rows, columns), float32."""
-        cfg, q = self.cfg, self.grid.q
+        cfg, q, a0 = self.cfg, self.grid.q, self.grid.a0
         N = cfg.sensor.columns
         nk = k1 - k0
+        coeffs = self.light_coefficients(k0, k1)
+        steady = [li for li in range(coeffs.shape[0]) if np.all(coeffs[li] == coeffs[li, 0])]
+        varying = [li for li in range(coeffs.shape[0]) if li not in steady]
+        combined = self._combined_kernels(tuple(float(coeffs[li, 0]) if li in steady else 0.0
+                                                for li in range(coeffs.shape[0])))
+        static = np.tensordot(coeffs.T.astype(np.float32), self.records.static, axes=1)  # (nk, M, N)
+        w0, planes = self._window(k0, k1)
         out = np.empty((nk, cfg.sensor.rows, N), dtype=np.float32)
         acc = np.empty((nk, N), dtype=np.float32)
         tmp = np.empty((nk, N), dtype=np.float32)
-        for i, kern in enumerate(self.kernels):
-            acc[...] = self.static_radiance[i]
-            ty, tx = kern.weights.shape[:2]
+
+        def apply(kern: _RowKernel, weights: np.ndarray, into: np.ndarray) -> None:
+            ty, tx = weights.shape[:2]
             for a in range(ty):
-                ya = kern.base_y + a
-                r0 = ya // q + k0 - self.first_frame
+                ya = kern.base_y + a - a0 + k0 * q - w0
+                r0 = ya // q
                 for b in range(tx):
                     xb = kern.base_x + b
+                    plane = planes[ya % q][xb % q]
                     c0 = xb // q
-                    plane = self._planes[ya % q][xb % q]
-                    if r0 < 0 or r0 + nk > plane.shape[0] or c0 + N > plane.shape[1]:
-                        raise RuntimeError("fast engine: frame outside the run texture")
-                    np.multiply(plane[r0 : r0 + nk, c0 : c0 + N], kern.weights[a, b], out=tmp)
-                    acc += tmp
+                    np.multiply(plane[r0 : r0 + nk, c0 : c0 + N], weights[a, b], out=tmp)
+                    into += tmp
+
+        part = np.empty((nk, N), dtype=np.float32) if varying else None
+        for i, kern in enumerate(self.kernels):
+            acc[...] = static[:, i]
+            apply(kern, combined[i], acc)
+            for li in varying:
+                part[...] = 0.0
+                apply(kern, kern.weights[li], part)
+                part *= coeffs[li].astype(np.float32)[:, None]
+                acc += part
             out[:, i, :] = acc
         return out

@@ -20,6 +20,7 @@ from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.engines import FastEngine, ReferenceEngine, check_fast_engine_valid
 from bench_sim.render.radiometry import airy_pixel_kernel, apply_psf, radiance_to_photons_factor
+from bench_sim.render.records import mitsuba_render_count
 from bench_sim.render.texture import RunTexture, run_texture
 from bench_sim.rig.geometry import RigGeometry, rig_geometry
 
@@ -73,8 +74,10 @@ def prepare(
     geom = rig_geometry(cfg)
     grid = run_texture(cfg, geom, first_frame, frames, rng)
     seed = int(rng.integers(0, 2**31 - 1))
-    cls = FastEngine if name == "fast" else ReferenceEngine
-    eng = cls(mi, cfg, geom, grid, seed, first_frame)
+    if name == "fast":
+        eng: Any = FastEngine(mi, cfg, geom, grid, seed, first_frame, variant=choice.variant)
+    else:
+        eng = ReferenceEngine(mi, cfg, geom, grid, seed, first_frame)
     s, lens = cfg.sensor, cfg.lens
     factor = radiance_to_photons_factor(
         s.rows,
@@ -109,6 +112,11 @@ def prepare(
         "fov_x_deg": geom.fov_x_deg,
         "magnification": geom.magnification,
         "panel_period_lines": grid.panel.period_px,
+        # Mitsuba renders made for this set-up (0 when the fast engine's records came from the
+        # process cache; the reference engine adds one per frame as frames are rendered) and in
+        # the whole process so far
+        "mitsuba_renders": eng.renders,
+        "mitsuba_renders_process": mitsuba_render_count(),
     }
     return RenderSetup(cfg, geom, grid, eng, choice, factor, psf, first_frame, frames, seed, info)
 
@@ -123,6 +131,8 @@ def iter_photon_frames(setup: RenderSetup, chunk: int = 64) -> Iterator[np.ndarr
         if setup.psf is not None:
             photons = apply_psf(photons, setup.psf).astype(np.float32)
         np.maximum(photons, 0.0, out=photons)
+        setup.info["mitsuba_renders"] = setup.engine.renders
+        setup.info["mitsuba_renders_process"] = mitsuba_render_count()
         yield photons
         k = k1
 

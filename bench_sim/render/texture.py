@@ -47,6 +47,11 @@ class RunTexture:
     def shape(self) -> tuple[int, int]:
         return self.values.shape  # type: ignore[return-value]
 
+    @property
+    def a0(self) -> int:
+        """Absolute index of the grid's first texel row (texel row ``A`` sits at ``y = A h_y``)."""
+        return round(self.y_start_m / self.h_y_m)
+
 
 def run_texture(
     cfg: BenchConfig, geom: RigGeometry, first_frame: int, frames: int, rng: np.random.Generator | None = None

@@ -1,5 +1,6 @@
 """The rig as a Mitsuba 3 scene: drum (analytic cylinder or trimesh meshes), printed target,
-thin-lens (or pinhole) camera, strong spot and weak diffuse fill.
+thin-lens (or pinhole) camera and the lights (``[lights.<name>]``: spot, fill, directional,
+point, area; by default the strong spot and the weak diffuse fill).
 
 The drum never moves in the scene: it is rotationally symmetric, so turning it is the same as
 shifting the target along the track. The target texture (see
@@ -21,34 +22,130 @@ import numpy as np
 from bench_sim.config import BenchConfig
 from bench_sim.rig.geometry import RigGeometry
 
-__all__ = ["scene_dict", "light_names", "spot_intensity_w_sr", "fill_radiance_w_m2_sr"]
+__all__ = [
+    "scene_dict",
+    "light_names",
+    "light_emitter",
+    "spot_intensity_w_sr",
+    "fill_radiance_w_m2_sr",
+    "intensity_w_sr",
+    "area_radiance_w_m2_sr",
+]
 
 
-def spot_intensity_w_sr(cfg: BenchConfig) -> float:
-    """Radiant intensity of the strong spot [W/sr]: ``E_normal * d^2`` at the aim point."""
-    s = cfg.lights.strong
-    d = float(np.linalg.norm(np.subtract(s.aim_m, s.position_m)))
-    return s.irradiance_w_m2 * d * d
+def intensity_w_sr(
+    irradiance_w_m2: float, position_m: Sequence[float], reference_m: Sequence[float]
+) -> float:
+    """Radiant intensity [W/sr] of a point-like source (spot inside its beam, point light) that
+    gives ``irradiance_w_m2`` on a plane normal to the ray at ``reference_m``: ``E d^2``
+    (inverse-square law) with ``d`` the distance from ``position_m``."""
+    d = float(np.linalg.norm(np.subtract(reference_m, position_m)))
+    return float(irradiance_w_m2) * d * d
 
 
-def fill_radiance_w_m2_sr(cfg: BenchConfig) -> float:
-    """Radiance of the weak fill (constant environment): ``E / pi``."""
-    return cfg.lights.weak.irradiance_w_m2 / math.pi
+def area_radiance_w_m2_sr(irradiance_w_m2: float, size_m: Sequence[float], distance_m: float) -> float:
+    """Radiance [W m^-2 sr^-1] of a Lambertian rectangle ``size_m = (w, h)`` that gives
+    ``irradiance_w_m2`` at distance ``d`` on its axis, on a plane parallel to it.
+
+    With half sizes ``a = w/2``, ``b = h/2`` (four corner rectangles of the differential-area to
+    parallel-rectangle view factor)::
+
+        E = 2 L [ a / sqrt(a^2 + d^2) * atan(b / sqrt(a^2 + d^2))
+                + b / sqrt(b^2 + d^2) * atan(a / sqrt(b^2 + d^2)) ]
+
+    which tends to ``L * w * h / d^2`` far away and to ``pi L`` close up.
+
+    References
+    ----------
+    J. R. Howell, M. P. Mengüç, K. Daun, R. Siegel, *Thermal Radiation Heat Transfer*, 7th ed.,
+    CRC Press 2021, view factor catalogue: differential planar element to a parallel rectangle
+    with one corner above it (case B-3).
+    """
+    a, b, d = 0.5 * float(size_m[0]), 0.5 * float(size_m[1]), float(distance_m)
+    ra, rb = math.hypot(a, d), math.hypot(b, d)
+    per_radiance = 2.0 * (a / ra * math.atan(b / ra) + b / rb * math.atan(a / rb))
+    return float(irradiance_w_m2) / per_radiance
+
+
+def spot_intensity_w_sr(cfg: BenchConfig, name: str = "strong") -> float:
+    """Radiant intensity of a spot [W/sr]: ``E_normal * d^2`` at its aim point."""
+    s = cfg.lights.get(name)
+    return intensity_w_sr(s.irradiance_w_m2, s.position_m, s.aim_m)  # type: ignore[union-attr]
+
+
+def fill_radiance_w_m2_sr(cfg: BenchConfig, name: str = "weak") -> float:
+    """Radiance of a fill (constant environment): ``E / pi``."""
+    return cfg.lights.get(name).irradiance_w_m2 / math.pi
 
 
 def light_names(cfg: BenchConfig) -> tuple[str, ...]:
-    """Names of the lights that emit in this bench (enabled, non-zero power), in a fixed order.
+    """Names of the lights that emit in this bench (enabled, non-zero power), in a fixed order
+    (``strong``, ``weak``, then the other ``[lights.<name>]`` by name).
 
     The scene is linear in each of them: the radiance of any frame is the sum over these lights
     of what the scene shows under that light alone (``scene_dict(..., lights=[name])``), each
     scaled by its relative intensity in that frame (:func:`bench_sim.rig.lights.frame_weights`).
     """
-    names = []
-    if cfg.lights.strong.enabled and cfg.lights.strong.irradiance_w_m2 > 0:
-        names.append("strong")
-    if cfg.lights.weak.enabled and cfg.lights.weak.irradiance_w_m2 > 0:
-        names.append("weak")
-    return tuple(names)
+    return tuple(name for name, light in cfg.lights.items() if light.emits)
+
+
+def _level(cfg: BenchConfig, light: Any, value: float, spectral: bool) -> Any:
+    """A light's emission spectrum: uniform (mono) or its spectrum over the band (spectral)."""
+    from bench_sim.rig import spectra
+
+    if spectral:
+        return spectra.light_spectrum(cfg, light, value)
+    return {"type": "uniform", "value": value}
+
+
+def light_emitter(mi: Any, cfg: BenchConfig, name: str, *, spectral: bool = False) -> dict[str, Any]:
+    """The Mitsuba object (emitter, or emitting shape for ``area``) of light ``name``.
+
+    The emitted quantity follows from ``irradiance_w_m2`` in closed form per kind
+    (:data:`bench_sim.config.LIGHT_KINDS`): spot and point intensity ``E d^2``
+    (:func:`intensity_w_sr`), directional irradiance ``E``, fill radiance ``E / pi``, area
+    radiance :func:`area_radiance_w_m2_sr`.
+    """
+    light = cfg.lights.get(name)
+    e = light.irradiance_w_m2
+    if light.kind in ("spot", "point"):
+        ref = light.aim_m if light.kind == "spot" else light.reference_m
+        intensity = _level(cfg, light, intensity_w_sr(e, light.position_m, ref), spectral)
+    if light.kind == "spot":
+        return {
+            "type": "spot",
+            "to_world": _look_at(mi, light.position_m, light.aim_m),
+            "intensity": intensity,
+            "cutoff_angle": light.cutoff_deg,
+            "beam_width": light.beam_width_deg,
+        }
+    if light.kind == "point":
+        return {
+            "type": "point",
+            "position": list(light.position_m),
+            "intensity": intensity,
+        }
+    if light.kind == "directional":
+        return {
+            "type": "directional",
+            "direction": [float(v) for v in np.divide(light.direction, np.linalg.norm(light.direction))],
+            "irradiance": _level(cfg, light, e, spectral),
+        }
+    if light.kind == "fill":
+        return {"type": "constant", "radiance": _level(cfg, light, e / math.pi, spectral)}
+    if light.kind == "area":
+        w, h = light.size_m
+        d = float(np.linalg.norm(np.subtract(light.aim_m, light.position_m)))
+        radiance = area_radiance_w_m2_sr(e, light.size_m, d)
+        return {
+            "type": "rectangle",  # [-1, 1]^2 in its local xy plane, emitting along local +z
+            "to_world": _look_at(mi, light.position_m, light.aim_m) @ mi.ScalarTransform4f().scale(
+                [0.5 * w, 0.5 * h, 1.0]
+            ),
+            "emitter": {"type": "area", "radiance": _level(cfg, light, radiance, spectral)},
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "uniform", "value": 0.0}},  # black back
+        }
+    raise ValueError(f"light {name!r}: unknown kind {light.kind!r}")  # pragma: no cover - validated
 
 
 def _look_at(mi: Any, origin, target, up=(0.0, 1.0, 0.0)) -> Any:
@@ -184,30 +281,15 @@ def scene_dict(
         if unknown:
             raise ValueError(f"lights {unknown}: not among this bench's emitting lights {list(active)}")
         active = tuple(n for n in active if n in lights)
-    strong = cfg.lights.strong
-    if "strong" in active:
-        scene["strong"] = {
-            "type": "spot",
-            "to_world": _look_at(mi, strong.position_m, strong.aim_m),
-            "intensity": spectra.light_spectrum(cfg, strong, spot_intensity_w_sr(cfg))
-            if spectral
-            else {"type": "uniform", "value": spot_intensity_w_sr(cfg)},
-            "cutoff_angle": strong.cutoff_deg,
-            "beam_width": strong.beam_width_deg,
-        }
-    weak = cfg.lights.weak
-    if "weak" in active:
-        scene["weak"] = {
-            "type": "constant",
-            "radiance": spectra.light_spectrum(cfg, weak, fill_radiance_w_m2_sr(cfg))
-            if spectral
-            else {"type": "uniform", "value": fill_radiance_w_m2_sr(cfg)},
-        }
+    for name in active:
+        scene[name] = light_emitter(mi, cfg, name, spectral=spectral)
+    fills = [n for n in active if cfg.lights.get(n).kind == "fill"]
+    if fills:
         # cosine-weighted BSDF sampling is ideal for a uniform fill seen by a diffuse surface:
-        # send the emitter samples to the spot (notes: cuts the fill's noise ~30x), or, with the
-        # fill alone, use BSDF samples only
-        if scene.get("strong") is not None:
-            scene["weak"]["sampling_weight"] = r.weak_sampling_weight
+        # send the emitter samples to the other lights (notes: cuts the fill's noise ~30x), or,
+        # with the fill alone, use BSDF samples only
+        if len(active) > len(fills):
+            scene[fills[0]]["sampling_weight"] = r.weak_sampling_weight
         elif direct["type"] == "direct":
             direct["emitter_samples"] = 0  # (direct is also the aov integrator's inner one)
     return scene

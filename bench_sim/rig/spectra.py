@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench_sim.config import BenchConfig, FillLightConfig, SpotLightConfig
+from bench_sim.config import BenchConfig, LightConfig
 
 __all__ = [
     "DEFAULT_QE_CURVE",
@@ -80,7 +80,7 @@ def response_values(cfg: BenchConfig) -> tuple[np.ndarray, np.ndarray]:
     return wl, s
 
 
-def emission_shape(light: SpotLightConfig | FillLightConfig, wl_nm: np.ndarray) -> np.ndarray:
+def emission_shape(light: LightConfig, wl_nm: np.ndarray) -> np.ndarray:
     """Relative spectral shape of a light on ``wl_nm`` (flat, or Planck's law at
     ``temperature_k``), normalised to integrate to 1 over the grid (per nm)."""
     if light.spectrum == "blackbody":
@@ -103,7 +103,7 @@ def spectrum_dict(wl_nm: np.ndarray, values: np.ndarray) -> dict[str, object]:
 
 
 def light_spectrum(
-    cfg: BenchConfig, light: SpotLightConfig | FillLightConfig, total: float
+    cfg: BenchConfig, light: LightConfig, total: float
 ) -> dict[str, object]:
     """Mitsuba spectrum whose integral over ``render.band_m`` is ``total`` (per-nm values)."""
     wl = _grid(cfg)

@@ -1,0 +1,359 @@
+"""Sweep specifications: what ``bench-sim sweep SPEC.toml`` varies, checked before anything runs.
+
+A spec is a TOML file::
+
+    name = "light_ratio_beta"            # default: the file's stem
+    base = "../paper_rig.toml"           # bench config, relative to the spec (default: the paper rig)
+    quick = true                         # apply reproduce's --quick preset to the base (default false)
+    seed = 0                             # root seed of the whole sweep
+    mode = "product"                     # "product" | "sequential" | "custom"
+    noise = "independent"                # "independent" | "common"
+
+    [overrides]                          # keys set on the base for every point (optional)
+    render = { spp = 8 }
+
+    [[parameters]]
+    key = "lights.strong.irradiance_w_m2"   # dotted key into the bench config
+    logspace = { start = 6.0, stop = 60000.0, num = 5 }
+
+    [[parameters]]
+    key = "dtdi.beta_bits"
+    values = [12, 16]
+
+Values of a parameter: ``values`` (a list; a value may itself be a list, e.g. a position),
+``range = { start, stop, step }`` (``stop`` included when the steps land on it),
+``linspace = { start, stop, num }`` or ``logspace = { start, stop, num }`` (geometric, from
+``start`` to ``stop``; both > 0).
+
+Modes
+-----
+``product``
+    Every combination: the point count is the product of the value counts; the first
+    parameter varies slowest.
+``sequential``
+    One parameter at a time, the others at the base's values (one-factor-at-a-time): the point
+    count is the sum of the value counts.
+``custom``
+    The points of a CSV file (``points = "file.csv"``, relative to the spec): the header names
+    the dotted keys, each row is a point; cells are parsed as TOML values (``12``, ``1.5e3``,
+    ``true``, ``"glossy"``, ``[0.0, 0.1, 0.45]``), bare words as strings.
+
+Streams
+-------
+``seed`` is the sweep's root: point ``i`` draws from
+``numpy.random.SeedSequence(seed).spawn(n)[i]``
+(:func:`bench_sim.experiments.execution.task_seed_sequence`), so its result never depends on
+the number of workers or on the order of completion. ``noise = "common"`` gives every point the
+stream of point 0 (paired comparisons: the differences between points are then not noise).
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel
+
+from bench_sim.config import BenchConfig, ConfigError, config_to_toml_dict, load_config, with_overrides
+from bench_sim.errors import BenchSimError
+
+__all__ = [
+    "MODES",
+    "NOISE",
+    "SPEC_KEYS",
+    "SweepSpec",
+    "SweepPoint",
+    "load_spec",
+    "parameter_values",
+    "key_exists",
+    "set_key",
+]
+
+MODES = ("product", "sequential", "custom")
+NOISE = ("independent", "common")
+VALUE_FORMS = ("values", "range", "linspace", "logspace")
+#: The keys a spec may hold, and what each is.
+SPEC_KEYS: dict[str, str] = {
+    "name": "name of the sweep (default: the spec file's stem)",
+    "description": "free text, copied into sweep.json and report.md",
+    "base": "bench config file, relative to the spec (default: the paper rig)",
+    "quick": "true: apply reproduce's --quick preset to the base",
+    "seed": "root seed (integer >= 0)",
+    "mode": "product | sequential | custom",
+    "noise": "independent | common",
+    "overrides": "table of config keys set on the base for every point",
+    "parameters": "[[parameters]] tables: key and one of values, range, linspace, logspace",
+    "points": "custom mode: CSV file of points, relative to the spec",
+}
+#: Points above which a spec is refused (a typo in a range, not a study).
+MAX_POINTS = 100_000
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """One point: its index, the values of the swept keys and its validated bench config."""
+
+    index: int
+    values: dict[str, Any]
+    cfg: BenchConfig
+    varied: str | None = None  # sequential mode: the key this point varies
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A checked spec: every point's config is valid (see :func:`load_spec`)."""
+
+    path: Path
+    name: str
+    description: str
+    mode: str
+    noise: str
+    seed: int
+    quick: bool
+    base: BenchConfig
+    keys: tuple[str, ...]
+    values: dict[str, list[Any]]
+    points: tuple[SweepPoint, ...]
+    raw: dict[str, Any] = field(repr=False)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Product mode: the number of values per key (the grid of ``sweep.nc``)."""
+        return tuple(len(self.values[k]) for k in self.keys)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready description (``sweep.json``'s ``spec``)."""
+        return {
+            "path": str(self.path),
+            "name": self.name,
+            "description": self.description,
+            "mode": self.mode,
+            "noise": self.noise,
+            "seed": self.seed,
+            "quick": self.quick,
+            "keys": list(self.keys),
+            "values": {k: list(v) for k, v in self.values.items()},
+            "points": len(self.points),
+            "raw": self.raw,
+        }
+
+
+def _err(spec: Path, msg: str) -> BenchSimError:
+    return BenchSimError(f"sweep spec {spec}: {msg}")
+
+
+def key_exists(cfg: BenchConfig, key: str) -> bool:
+    """True when the dotted ``key`` names a setting of ``cfg`` (a field of a section, of a light
+    defined in it, or a top-level field)."""
+    cur: Any = cfg
+    for part in key.split("."):
+        if not isinstance(cur, BaseModel):
+            return False
+        extra = cur.__pydantic_extra__ or {}
+        if part not in type(cur).model_fields and part not in extra:
+            return False
+        cur = getattr(cur, part)
+    return True
+
+
+def set_key(data: dict[str, Any], key: str, value: Any) -> dict[str, Any]:
+    """A nested dict that sets the dotted ``key`` to ``value`` on top of ``data`` (a copy)."""
+    out = json.loads(json.dumps(data))
+    cur = out
+    parts = key.split(".")
+    for part in parts[:-1]:
+        cur = cur.setdefault(part, {})
+    cur[parts[-1]] = value
+    return out
+
+
+def _number(spec: Path, key: str, form: str, table: dict[str, Any], name: str) -> float:
+    v = table.get(name)
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise _err(spec, f"parameter {key}: {form}.{name} = {v!r}: needs a finite number")
+    return v
+
+
+def parameter_values(spec: Path, key: str, table: dict[str, Any]) -> list[Any]:
+    """The values of one ``[[parameters]]`` table (see the module docstring)."""
+    forms = [f for f in VALUE_FORMS if f in table]
+    if len(forms) != 1:
+        raise _err(
+            spec, f"parameter {key}: give exactly one of {', '.join(VALUE_FORMS)} (found {forms or 'none'})"
+        )
+    form = forms[0]
+    spec_v = table[form]
+    if form == "values":
+        if not isinstance(spec_v, list) or not spec_v:
+            raise _err(spec, f"parameter {key}: values = {spec_v!r}: needs a non-empty list")
+        return list(spec_v)
+    if not isinstance(spec_v, dict):
+        raise _err(
+            spec, f"parameter {key}: {form} = {spec_v!r}: needs a table like {{ start = .., stop = .. }}"
+        )
+    need = ("start", "stop", "step") if form == "range" else ("start", "stop", "num")
+    unknown = sorted(set(spec_v) - set(need))
+    if unknown:
+        raise _err(spec, f"parameter {key}: {form}.{unknown[0]}: unknown (allowed: {', '.join(need)})")
+    start, stop = (_number(spec, key, form, spec_v, n) for n in need[:2])
+    if form == "range":
+        step = _number(spec, key, form, spec_v, "step")
+        if step == 0 or (stop - start) / step < 0:
+            raise _err(spec, f"parameter {key}: range step = {step!r} never goes from {start!r} to {stop!r}")
+        n = int(math.floor((stop - start) / step + 1e-9)) + 1
+        vals = [start + i * step for i in range(n)]
+        if all(isinstance(x, int) for x in (start, stop, step)):
+            return [int(v) for v in vals]
+        return [float(v) for v in vals]
+    num = spec_v.get("num")
+    if isinstance(num, bool) or not isinstance(num, int) or num < 1:
+        raise _err(spec, f"parameter {key}: {form}.num = {num!r}: needs an integer >= 1")
+    if form == "linspace":
+        return [float(v) for v in np.linspace(start, stop, num)]
+    if start <= 0 or stop <= 0:
+        raise _err(spec, f"parameter {key}: logspace from {start!r} to {stop!r}: both must be > 0")
+    return [float(v) for v in np.geomspace(start, stop, num)]
+
+
+def _cell(text: str) -> Any:
+    """A CSV cell as a TOML value (bare words as strings)."""
+    text = text.strip()
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _custom_points(spec: Path, table: Any) -> tuple[tuple[str, ...], list[dict[str, Any]]]:
+    if not isinstance(table, str):
+        raise _err(
+            spec, f"points = {table!r}: custom mode needs points = \"FILE.csv\" (relative to the spec)"
+        )
+    path = (spec.parent / table).resolve()
+    if not path.is_file():
+        raise _err(spec, f"points = {table!r}: no such file {path}")
+    with path.open(newline="") as fh:
+        rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+    if len(rows) < 2:
+        raise _err(spec, f"points = {table!r}: needs a header of dotted keys and at least one row")
+    keys = tuple(h.strip() for h in rows[0])
+    for n, row in enumerate(rows[1:], start=2):
+        if len(row) != len(keys):
+            raise _err(spec, f"points = {table!r}: row {n} has {len(row)} cells for {len(keys)} keys")
+    return keys, [dict(zip(keys, (_cell(c) for c in row), strict=True)) for row in rows[1:]]
+
+
+def _validated(spec: Path, base: dict[str, Any], values: dict[str, Any], index: int) -> BenchConfig:
+    data = base
+    for key, value in values.items():
+        data = set_key(data, key, value)
+    where = f"{spec} point {index} ({', '.join(f'{k} = {v!r}' for k, v in values.items())})"
+    try:
+        from bench_sim.config import config_from_dict
+
+        return config_from_dict(data, source=where)
+    except ConfigError as exc:
+        raise ConfigError(str(exc).replace("config error: ", "sweep spec ", 1)) from None
+
+
+def load_spec(path: str | Path) -> SweepSpec:
+    """Read and check a sweep spec: every key, every value and every point's config.
+
+    Raises :class:`~bench_sim.errors.BenchSimError` (one line naming the spec, the key or point
+    and what is allowed) on the first problem, before anything runs.
+    """
+    spec = Path(path).expanduser().resolve()
+    if not spec.is_file():
+        raise BenchSimError(f"sweep spec {spec}: no such file")
+    try:
+        raw = tomllib.loads(spec.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise _err(spec, f"not valid TOML ({exc})") from None
+    unknown = sorted(set(raw) - set(SPEC_KEYS))
+    if unknown:
+        raise _err(spec, f"unknown key '{unknown[0]}' (allowed: {', '.join(SPEC_KEYS)})")
+    mode = raw.get("mode", "product")
+    if mode not in MODES:
+        raise _err(spec, f"mode = {mode!r}: allowed {', '.join(MODES)}")
+    noise = raw.get("noise", "independent")
+    if noise not in NOISE:
+        raise _err(spec, f"noise = {noise!r}: allowed {', '.join(NOISE)}")
+    seed = raw.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise _err(spec, f"seed = {seed!r}: needs an integer >= 0")
+    quick = raw.get("quick", False)
+    if not isinstance(quick, bool):
+        raise _err(spec, f"quick = {quick!r}: needs true or false")
+    name = raw.get("name", spec.stem)
+    description = raw.get("description", "")
+    if not isinstance(name, str) or not name or not isinstance(description, str):
+        raise _err(spec, "name and description must be strings (name not empty)")
+
+    base_file = raw.get("base")
+    if base_file is not None and not isinstance(base_file, str):
+        raise _err(spec, f"base = {base_file!r}: needs a config file name")
+    base_cfg = load_config((spec.parent / base_file).resolve() if base_file else None)
+    if quick:
+        from bench_sim.experiments.reproduce import quick_config
+
+        base_cfg = quick_config(base_cfg)
+    overrides = raw.get("overrides", {})
+    if not isinstance(overrides, dict):
+        raise _err(spec, f"overrides = {overrides!r}: needs a table ([overrides])")
+    if overrides:
+        base_cfg = with_overrides(base_cfg, overrides, source=f"{spec} [overrides]")
+    base = config_to_toml_dict(base_cfg)
+
+    keys: tuple[str, ...]
+    values: dict[str, list[Any]] = {}
+    combos: list[tuple[dict[str, Any], str | None]] = []
+    if mode == "custom":
+        if "parameters" in raw:
+            raise _err(spec, "mode = 'custom' takes its keys from the points file: remove [[parameters]]")
+        keys, rows = _custom_points(spec, raw.get("points"))
+        combos = [(row, None) for row in rows]
+        for k in keys:
+            values[k] = [row[k] for row in rows]
+    else:
+        if "points" in raw:
+            raise _err(spec, f"points = {raw['points']!r}: only for mode = 'custom'")
+        params = raw.get("parameters")
+        if not isinstance(params, list) or not params or not all(isinstance(p, dict) for p in params):
+            raise _err(spec, "needs [[parameters]] tables (key and values)")
+        key_list = []
+        for p in params:
+            key = p.get("key")
+            if not isinstance(key, str) or not key:
+                raise _err(spec, f"[[parameters]] {p!r}: needs key = \"section.setting\"")
+            extra = sorted(set(p) - {"key", *VALUE_FORMS})
+            if extra:
+                allowed = ", ".join(("key", *VALUE_FORMS))
+                raise _err(spec, f"parameter {key}: unknown '{extra[0]}' (allowed: {allowed})")
+            if key in key_list:
+                raise _err(spec, f"parameter {key}: given twice")
+            key_list.append(key)
+            values[key] = parameter_values(spec, key, p)
+        keys = tuple(key_list)
+        if mode == "product":
+            combos = [(dict(zip(keys, c, strict=True)), None) for c in itertools.product(*values.values())]
+        else:
+            combos = [({k: v}, k) for k in keys for v in values[k]]
+    for k in keys:
+        if not key_exists(base_cfg, k):
+            raise _err(spec, f"key {k!r}: not a setting of the bench config (check the section and name)")
+    if not combos:
+        raise _err(spec, "no points")
+    if len(combos) > MAX_POINTS:
+        raise _err(spec, f"{len(combos)} points: more than {MAX_POINTS}; split the sweep")
+    points = tuple(
+        SweepPoint(i, vals, _validated(spec, base, vals, i), varied)
+        for i, (vals, varied) in enumerate(combos)
+    )
+    return SweepSpec(spec, name, description, mode, noise, seed, quick, base_cfg, keys, values, points, raw)

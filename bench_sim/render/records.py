@@ -1,0 +1,233 @@
+"""The fast engine's Mitsuba records, one set per light, rendered once per process and reused.
+
+The fast engine (:class:`bench_sim.render.engines.FastEngine`) needs, for every record (one of
+``subpixels x subpixels`` film samples per sensor pixel), the mean hit position on the drum and,
+for every light ``l`` alone, the radiance ``S0_l`` the record sees from everything that is not
+the drum's print and the radiance per unit albedo ``D_l`` the print sends it. Mitsuba renders:
+
+1. the hit positions: an ``aov`` render (no light needed);
+2. per light, the scene under that light alone (:func:`bench_sim.rig.scene.scene_dict` with
+   ``lights=[name]``) on a drum of albedo 1 -- and, for the trimesh drum, of albedo 0 (``S0``);
+   on the analytic cylinder a record either hit the drum or saw the light directly, so ``S0``
+   is the radiance of the records that missed it.
+
+All renders use the same film, samples per pixel and sampler seed (:data:`RECORD_SEED`), so they
+trace the same camera rays: positions and radiances belong to the same samples.
+
+Reuse
+    Radiance is linear in each light's power, so every light is rendered at the reference
+    irradiance :data:`REFERENCE_IRRADIANCE_W_M2` and scaled by ``irradiance_w_m2 /
+    REFERENCE_IRRADIANCE_W_M2`` when frames are formed; the records are per unit albedo, so the
+    target pattern does not enter them either. A process-level cache keyed by everything that
+    does change them (:func:`records_key`: drum, lens, sensor size and wavelength, timing,
+    render settings, the lights' kinds, positions, aims and spectra, the print's finish, the
+    Mitsuba variant) -- but not by a light's power, its flicker (``flicker_*``), the target
+    pattern, the sensor's noise model, DTDI, fusion or the run's seed -- makes a sweep of any
+    of those inside one process cost one set of Mitsuba renders. :func:`mitsuba_render_count`
+    counts every ``mi.render`` call made in the process.
+
+The records are rendered with a fixed sampler seed, not the run's: they are the engine's
+estimate of the scene's (deterministic) radiance, whose Monte Carlo error (about 1 % per pixel at
+16 spp x 4 x 4 records) is a fixed error of the renderer, the same for every run of the scene.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bench_sim.config import BenchConfig, config_to_toml_dict, with_overrides
+from bench_sim.rig.geometry import RigGeometry
+from bench_sim.rig.scene import light_names, scene_dict
+
+__all__ = [
+    "LightRecords",
+    "REFERENCE_IRRADIANCE_W_M2",
+    "RECORD_SEED",
+    "render_array",
+    "mitsuba_render_count",
+    "light_power_w_m2",
+    "reference_config",
+    "records_key",
+    "light_records",
+    "clear_record_cache",
+]
+
+#: Irradiance [W/m^2] every light is rendered at; frames scale by ``irradiance_w_m2`` / this.
+REFERENCE_IRRADIANCE_W_M2 = 1.0
+#: Mitsuba sampler seed of every record render (the records do not depend on the run's seed).
+RECORD_SEED = 0
+#: Record sets kept by the process-level cache (least recently used dropped first).
+CACHE_ENTRIES = 2
+
+#: Sensor settings that only the pixel model reads (not the renderer): not part of the key.
+_SENSOR_NOISE_MODEL = frozenset({
+    "full_well_e", "read_noise_e", "dark_current_e_s", "dsnu_e_s", "prnu", "column_offset_dn",
+    "conversion_gain_dn_per_e", "black_offset_dn", "adc_bits", "shot_noise", "dark_noise",
+    "read_noise", "prnu_enabled", "dsnu_enabled", "column_fpn", "quantization",
+    "shot_noise_sampler",
+})
+#: Target settings the records depend on (the print's surface, not its pattern).
+_TARGET_SURFACE = frozenset({"finish", "gloss_roughness"})
+
+_lock = threading.Lock()
+_renders = 0
+_cache: OrderedDict[str, LightRecords] = OrderedDict()
+
+
+def render_array(mi: Any, scene: Any, spp: int, seed: int) -> np.ndarray:
+    """``mi.render`` as a float32 array (height, width, channels), counted by
+    :func:`mitsuba_render_count`."""
+    global _renders
+    img = mi.render(scene, spp=spp, seed=int(seed) & 0x7FFFFFFF)
+    with _lock:
+        _renders += 1
+    return np.array(img, dtype=np.float32)
+
+
+def mitsuba_render_count() -> int:
+    """Number of Mitsuba renders (``mi.render`` calls) made in this process so far."""
+    return _renders
+
+
+def _lights_table(cfg: BenchConfig) -> dict[str, dict[str, Any]]:
+    lights = config_to_toml_dict(cfg).get("lights", {})
+    return {k: v for k, v in lights.items() if isinstance(v, dict) and "irradiance_w_m2" in v}
+
+
+def light_power_w_m2(cfg: BenchConfig, name: str) -> float:
+    """The configured irradiance ``lights.<name>.irradiance_w_m2`` [W/m^2] of light ``name``."""
+    table = _lights_table(cfg)
+    if name not in table:
+        raise ValueError(f"light {name!r}: not a light of this bench ({sorted(table)})")
+    return float(table[name]["irradiance_w_m2"])
+
+
+def reference_config(cfg: BenchConfig) -> BenchConfig:
+    """``cfg`` with every light at :data:`REFERENCE_IRRADIANCE_W_M2` (enabled lights of zero
+    power included, so they have records too)."""
+    over = {name: {"irradiance_w_m2": REFERENCE_IRRADIANCE_W_M2} for name in _lights_table(cfg)}
+    return with_overrides(cfg, {"lights": over}, source="fast engine reference lights")
+
+
+def records_key(cfg: BenchConfig, variant: str) -> str:
+    """Cache key of the records of ``cfg`` rendered with Mitsuba ``variant``: the resolved
+    config without what the records do not depend on (see the module docstring), as JSON."""
+    d = config_to_toml_dict(cfg)
+    for k in ("name", "lines", "dtdi", "fusion"):
+        d.pop(k, None)
+    d["target"] = {k: v for k, v in d.get("target", {}).items() if k in _TARGET_SURFACE}
+    d["sensor"] = {k: v for k, v in d.get("sensor", {}).items() if k not in _SENSOR_NOISE_MODEL}
+    d.get("timing", {}).pop("sync_error", None)  # the drum's speed: records are at frame 0
+    d.get("render", {}).pop("engine", None)
+    lights = {}
+    for name, light in d.get("lights", {}).items():
+        if isinstance(light, dict):
+            light = {
+                k: v for k, v in light.items() if k != "irradiance_w_m2" and not k.startswith("flicker_")
+            }
+        lights[name] = light
+    d["lights"] = lights
+    d["variant"] = variant
+    d["record_seed"] = RECORD_SEED
+    return json.dumps(d, sort_keys=True)
+
+
+@dataclass
+class LightRecords:
+    """Per-light records of one scene (see the module docstring), at the reference power.
+
+    Attributes
+    ----------
+    lights
+        Light names, in the order of the arrays' first axis.
+    d_rec
+        (L, M s, N s) float32: radiance per unit albedo [W m^-2 sr^-1] of every record under
+        each light alone (``D_l``).
+    static
+        (L, M, N) float32: pixel-mean radiance not from the print (``S0_l``) under each light.
+    position
+        (M s, N s, 3) float32: mean hit position [m] of every record (0 where all samples missed).
+    hit
+        (M s, N s) bool: the record hit the drum.
+    key
+        :func:`records_key` of the scene.
+    renders
+        Mitsuba renders that made these records.
+    derived
+        Quantities derived from the records and cached with them (the engine's kernels).
+    """
+
+    lights: tuple[str, ...]
+    d_rec: np.ndarray
+    static: np.ndarray
+    position: np.ndarray
+    hit: np.ndarray
+    key: str
+    renders: int
+    derived: dict[Any, Any] = field(default_factory=dict)
+
+
+def _render_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, key: str) -> LightRecords:
+    ref = reference_config(cfg)
+    M, N, ss = cfg.sensor.rows, cfg.sensor.columns, cfg.render.subpixels
+    spp, spectral = cfg.render.spp, cfg.render.spectral
+    count0 = mitsuba_render_count()
+
+    def scene(albedo: float, lights: list[str], aov: bool) -> dict[str, Any]:
+        return scene_dict(
+            mi, ref, geom, {"type": "uniform", "value": albedo}, width=N * ss, height=M * ss,
+            spp=spp, aov_position=aov, spectral=spectral, lights=lights,
+        )
+
+    # hit positions alone: the aov integrator without an inner one traces the camera rays only
+    d = scene(1.0, [], True)
+    d["integrator"] = {"type": "aov", "aovs": "pos:position"}
+    position = render_array(mi, mi.load_dict(d), spp, RECORD_SEED)[..., -3:]
+    hit = ~np.all(position == 0.0, axis=-1)
+    names = light_names(ref)
+    d_rec = np.empty((len(names), M * ss, N * ss), dtype=np.float32)
+    static = np.empty((len(names), M, N), dtype=np.float32)
+    for li, name in enumerate(names):
+        lit = render_array(mi, mi.load_dict(scene(1.0, [name], False)), spp, RECORD_SEED)[..., 0]
+        if cfg.drum.geometry == "analytic":
+            # the drum is the only shape: a record either hit it (no light without its albedo)
+            # or missed everything (sees the light directly, independent of the albedo)
+            s0 = np.where(hit, 0.0, lit).astype(np.float32)
+        else:
+            s0 = render_array(mi, mi.load_dict(scene(0.0, [name], False)), spp, RECORD_SEED)[..., 0]
+        d_rec[li] = lit - s0
+        static[li] = s0.reshape(M, ss, N, ss).mean(axis=(1, 3))
+    return LightRecords(
+        tuple(names), d_rec, static, position, hit, key, mitsuba_render_count() - count0
+    )
+
+
+def light_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, variant: str) -> tuple[LightRecords, bool]:
+    """The records of ``cfg``'s scene: from the process-level cache, or rendered now.
+
+    Returns ``(records, rendered)``; ``rendered`` is False on a cache hit.
+    """
+    key = records_key(cfg, variant)
+    with _lock:
+        rec = _cache.get(key)
+        if rec is not None:
+            _cache.move_to_end(key)
+            return rec, False
+    rec = _render_records(mi, cfg, geom, key)
+    with _lock:
+        _cache[key] = rec
+        while len(_cache) > CACHE_ENTRIES:
+            _cache.popitem(last=False)
+    return rec, True
+
+
+def clear_record_cache() -> None:
+    """Forget every cached record set (the next fast-engine set-up renders again)."""
+    with _lock:
+        _cache.clear()

@@ -1,0 +1,76 @@
+"""The fast engine is linear in each light: records rendered once per light and reused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench_sim.render import engines, records
+from bench_sim.render.exposures import iter_photon_frames, prepare
+from tests.conftest import tiny_cfg
+
+FIRST = 60  # bar groups of the tiny panel in view
+
+
+def _frames(cfg, frames=6, seed=0):
+    setup = prepare(cfg, frames, np.random.default_rng(seed), engine="fast", first_frame=FIRST)
+    return np.concatenate(list(iter_photon_frames(setup))), setup
+
+
+def _lights(strong_w_m2: float, weak_w_m2: float, **sections):
+    lights = {"strong": {"irradiance_w_m2": strong_w_m2}, "weak": {"irradiance_w_m2": weak_w_m2}}
+    return tiny_cfg(lights=lights, **sections)
+
+
+def test_light_power_change_reuses_records_and_equals_a_fresh_render():
+    """A new light power, target or sensor noise model makes no Mitsuba render; the frames
+    equal those of a fresh render at the new power, and are linear in each light's power:
+    ``P(3 E_s) - P(E_s) = 2 (P(E_s) - P(0))``."""
+    records.clear_record_cache()
+    base, s0 = _frames(_lights(128.0, 6.0))
+    assert s0.info["mitsuba_renders"] == 3  # hit positions, then each light alone
+    n0 = records.mitsuba_render_count()
+    tripled, s1 = _frames(_lights(384.0, 6.0), seed=1)
+    dark, _ = _frames(_lights(0.0, 6.0))
+    other, _ = _frames(_lights(128.0, 6.0, target={"layout": "uniform"}, sensor={"read_noise_e": 3.0}))
+    assert records.mitsuba_render_count() == n0 and s1.info["mitsuba_renders"] == 0
+    assert not np.allclose(other, base)
+    scale = float(base.mean())
+    np.testing.assert_allclose(tripled - base, 2.0 * (base - dark), rtol=0, atol=2e-5 * scale)
+    assert float((base - dark).mean()) > 0.1 * scale  # the spot is really in view
+    records.clear_record_cache()
+    fresh, s2 = _frames(_lights(384.0, 6.0))
+    assert s2.info["mitsuba_renders"] == 3
+    np.testing.assert_allclose(tripled, fresh, rtol=1e-6, atol=1e-6 * scale)
+
+
+def test_flicker_weights_scale_each_light_per_frame(monkeypatch):
+    """With per-frame weights ``w_l(k)`` (flicker), frame ``k`` is ``sum_l w_l(k) P_l(k)``, where
+    ``P_l`` are the frames under light ``l`` alone (the other light at zero power) -- and no
+    render is made for it."""
+    strong_only, _ = _frames(_lights(128.0, 0.0))
+    weak_only, _ = _frames(_lights(0.0, 6.0))
+    n0 = records.mitsuba_render_count()
+    ks = np.arange(FIRST, FIRST + 6)
+    weights = {"strong": 1.0 + 0.8 * np.sin(0.9 * ks), "weak": np.full(ks.size, 0.25)}
+
+    def frame_weights(cfg, name, k0, k1):
+        return weights[name][k0 - FIRST : k1 - FIRST]
+
+    monkeypatch.setattr(engines, "frame_weights", frame_weights)
+    both, setup = _frames(_lights(128.0, 6.0))
+    assert setup.info["mitsuba_renders"] == 0 and records.mitsuba_render_count() == n0
+    expected = weights["strong"][:, None, None] * strong_only + weights["weak"][:, None, None] * weak_only
+    np.testing.assert_allclose(both, expected, rtol=1e-5, atol=1e-5 * float(expected.mean()))
+    # the weights really vary: frames differ from the steady sum by more than float error
+    assert np.abs(both - (strong_only + weak_only)).max() > 0.1 * float(expected.mean())
+
+
+@pytest.mark.parametrize(
+    "change", [{"lens": {"f_number": 5.6}}, {"lights": {"strong": {"aim_m": [0.0, 0.0, 0.1]}}}]
+)
+def test_geometry_or_light_placement_change_renders_again(change):
+    records.clear_record_cache()
+    _frames(tiny_cfg())
+    _, setup = _frames(tiny_cfg(**change))
+    assert setup.info["mitsuba_renders"] == 3
