@@ -2,8 +2,8 @@
 
 Each run is a ``bench-sim`` command in a child process; its peak resident memory is the
 child's ``ru_maxrss`` (``os.wait4``) and its output size the bytes under ``--out``. The
-estimates (:mod:`bench_sim.resources`) should be upper bounds within about 2x: a ratio below 1
-means a run could be let through that does not fit, far above 2 that a run could be refused
+estimates (:mod:`bench_sim.resources`) should be upper bounds within about 2.5x: a ratio below 1
+means a run could be let through that does not fit, far above 2.5 that a run could be refused
 that would.
 
 Run: ``.venv/bin/python benchmarks/bench_resources.py`` (a few minutes on two cores).
