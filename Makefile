@@ -34,6 +34,7 @@ bench: setup
 	$(PY) benchmarks/bench_fusion.py
 	$(PY) benchmarks/bench_reproduce.py
 	$(PY) benchmarks/bench_sweep.py
+	$(PY) benchmarks/bench_resources.py
 
 clean:
 	rm -rf $(VENV) .setup-stamp

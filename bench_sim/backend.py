@@ -8,6 +8,12 @@ tried in this process: each is probed in a child process that runs a small kerne
 the library's path, size, mtime and the Dr.Jit version. ``DRJIT_LIBLLVM_PATH`` is set before
 Mitsuba is first imported.
 
+A forced choice is forced: ``render.variant`` or ``BENCH_SIM_VARIANT`` naming a kind or a variant
+that does not exist, or a backend that cannot run here, is a one-line
+:class:`~bench_sim.errors.BenchSimError` (never a silent fallback); only ``"auto"`` falls back.
+A probe cache that cannot be used (unreadable, not JSON, or JSON of another shape) is ignored
+and rewritten.
+
 Nothing in this module imports mitsuba or drjit at module import time.
 """
 
@@ -26,6 +32,8 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+from bench_sim.errors import BenchSimError
+
 __all__ = [
     "BackendChoice",
     "ProbeResult",
@@ -33,9 +41,16 @@ __all__ = [
     "probe_llvm",
     "probe_cuda",
     "choose_backend",
+    "select_backend",
     "init_mitsuba",
     "variant_for",
+    "mitsuba_variants",
+    "resolve_preference",
+    "check_variant_name",
 ]
+
+ENV_VARIANT = "BENCH_SIM_VARIANT"
+KINDS = ("cuda", "llvm", "scalar")
 
 ENV_LLVM = "DRJIT_LIBLLVM_PATH"
 #: Child-process probe: import drjit with the candidate library and run a kernel with
@@ -154,10 +169,21 @@ def _cache_key(kind: str, path: str | None) -> str:
 
 
 def _load_cache() -> dict[str, Any]:
+    """The probe cache; ``{}`` when it is missing, unreadable, not JSON or not a JSON object."""
     try:
-        return json.loads(_cache_file().read_text())
+        data = json.loads(_cache_file().read_text())
     except (OSError, ValueError):
         return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _cached(key: str) -> ProbeResult | None:
+    """The cached verdict under ``key``, or ``None`` if absent or not of the shape
+    ``{"ok": bool, "detail": str}`` (such an entry is probed again and overwritten)."""
+    hit = _load_cache().get(key)
+    if isinstance(hit, dict) and isinstance(hit.get("ok"), bool) and isinstance(hit.get("detail"), str):
+        return ProbeResult(hit["ok"], hit["detail"] + " (cached)")
+    return None
 
 
 def _store_cache(key: str, result: ProbeResult) -> None:
@@ -216,10 +242,8 @@ def probe_llvm(
     Verdicts are cached on disk (``$BENCH_SIM_CACHE_DIR`` or ``~/.cache/bench_sim``).
     """
     key = _cache_key("llvm", path)
-    if use_cache:
-        hit = _load_cache().get(key)
-        if hit is not None:
-            return ProbeResult(bool(hit["ok"]), str(hit["detail"]) + " (cached)")
+    if use_cache and (hit := _cached(key)) is not None:
+        return hit
     result = _run_probe(_LLVM_PROBE, {ENV_LLVM: path}, "BENCH_SIM_LLVM_OK", runner, timeout_s)
     if use_cache:
         _store_cache(key, result)
@@ -233,10 +257,8 @@ def probe_cuda(
     if not (glob.glob("/dev/nvidia*") or glob.glob("/usr/lib/*-linux-gnu/libcuda.so*")):
         return ProbeResult(False, "no NVIDIA device or driver library found")
     key = _cache_key("cuda", None)
-    if use_cache:
-        hit = _load_cache().get(key)
-        if hit is not None:
-            return ProbeResult(bool(hit["ok"]), str(hit["detail"]) + " (cached)")
+    if use_cache and (hit := _cached(key)) is not None:
+        return hit
     result = _run_probe(_CUDA_PROBE, {}, "BENCH_SIM_CUDA_OK", runner, timeout_s)
     if use_cache:
         _store_cache(key, result)
@@ -254,13 +276,86 @@ def variant_for(kind: str, mode: str = "mono") -> str:
     return f"{kind}_ad_{mode}"
 
 
+def mitsuba_variants() -> tuple[str, ...]:
+    """The variants the installed Mitsuba was built with, read from its ``config.py`` without
+    importing Mitsuba (``()`` if Mitsuba is not installed)."""
+    import ast
+    from importlib.metadata import files
+
+    try:  # the installed files (an imported Mitsuba replaces its own module spec)
+        paths = [Path(str(f.locate())) for f in files("mitsuba") or () if f.name == "config.py"]
+    except PackageNotFoundError:
+        return ()
+    for path in paths:
+        if path.parent.name != "mitsuba":
+            continue
+        try:
+            tree = ast.parse(path.read_text())
+        except (OSError, SyntaxError, ValueError):
+            continue
+        for node in tree.body:
+            if (
+                isinstance(node, ast.Assign)
+                and any(isinstance(t, ast.Name) and t.id == "MI_VARIANTS" for t in node.targets)
+            ):
+                value = ast.literal_eval(node.value)
+                return tuple(str(v) for v in value)
+    return ()
+
+
+def resolve_preference(config_variant: str = "auto") -> tuple[str, str]:
+    """The backend preference and where it comes from: ``render.variant`` unless it is
+    ``"auto"``, then the environment variable ``BENCH_SIM_VARIANT``, else ``"auto"``.
+
+    Returns ``(preference, source)`` with ``source`` the name to quote in messages.
+    """
+    if config_variant != "auto":
+        return config_variant, "render.variant"
+    env = os.environ.get(ENV_VARIANT)
+    if env is not None and env.strip() not in ("", "auto"):
+        return env.strip(), ENV_VARIANT
+    return "auto", "render.variant"
+
+
+def _allowed_variants(mode: str) -> list[str]:
+    want = "spectral" if mode == "spectral" else ("mono", "rgb")
+    return [
+        v for v in mitsuba_variants() if "polarized" not in v and v.rsplit("_", 1)[-1] in want
+    ]
+
+
+def check_variant_name(prefer: str, mode: str = "mono", source: str = "render.variant") -> None:
+    """Refuse a preference that names no backend kind and no usable Mitsuba variant.
+
+    Allowed: ``"auto"``, ``"cuda"``, ``"llvm"``, ``"scalar"``, or a variant the installed Mitsuba
+    has for the colour mode (``*_mono`` / ``*_rgb`` for mono, ``*_spectral`` for spectral
+    rendering; polarised variants are not used). Raises :class:`BenchSimError` naming ``source``.
+    """
+    if prefer in ("auto", *KINDS):
+        return
+    allowed = _allowed_variants(mode)
+    if prefer in allowed:
+        return
+    known = mitsuba_variants()
+    why = (
+        f"not a variant for {mode} rendering" if prefer in known
+        else "not a Mitsuba variant of this installation" if known
+        else "Mitsuba is not installed"
+    )
+    listed = ", ".join(allowed) if allowed else "-"
+    raise BenchSimError(
+        f"{source} = {prefer!r}: {why}; allowed 'auto', 'cuda', 'llvm', 'scalar' or one of: {listed}"
+    )
+
+
 def choose_backend(
     prefer: str = "auto",
     mode: str = "mono",
     *,
-    llvm_probe: Callable[[str], ProbeResult] = probe_llvm,
-    cuda_probe: Callable[[], ProbeResult] = probe_cuda,
-    candidates: Callable[[], list[str]] = llvm_candidates,
+    llvm_probe: Callable[[str], ProbeResult] | None = None,
+    cuda_probe: Callable[[], ProbeResult] | None = None,
+    candidates: Callable[[], list[str]] | None = None,
+    source: str | None = None,
 ) -> BackendChoice:
     """Choose a variant: CUDA if it works, else LLVM with the first library that passes its
     probe, else scalar (with a warning).
@@ -269,21 +364,29 @@ def choose_backend(
     ----------
     prefer
         ``"auto"``, a backend kind (``"cuda"``, ``"llvm"``, ``"scalar"``) or a full variant name.
-        Environment variable ``BENCH_SIM_VARIANT`` overrides ``"auto"``.
+        Environment variable ``BENCH_SIM_VARIANT`` overrides ``"auto"``. Anything but ``"auto"``
+        is forced: if that backend cannot run here, :class:`BenchSimError` says why (one line).
     mode
         ``"mono"`` (default), ``"rgb"`` or ``"spectral"``.
+    llvm_probe, cuda_probe, candidates
+        The probes and the library search (default: :func:`probe_llvm`, :func:`probe_cuda`,
+        :func:`llvm_candidates`).
+    source
+        Where ``prefer`` came from, for messages (default: ``render.variant``, or
+        ``BENCH_SIM_VARIANT`` when the environment supplied it).
     """
+    llvm_probe = llvm_probe or probe_llvm
+    cuda_probe = cuda_probe or probe_cuda
+    candidates = candidates or llvm_candidates
     if prefer == "auto":
-        prefer = os.environ.get("BENCH_SIM_VARIANT", "auto")
+        prefer, env_source = resolve_preference("auto")
+        source = source or env_source
+    source = source or "render.variant"
+    check_variant_name(prefer, mode, source)
     probes: dict[str, str] = {}
     explicit_variant = prefer if "_" in prefer else None
     wanted = prefer.split("_", 1)[0] if explicit_variant else prefer
-    if wanted not in ("auto", "cuda", "llvm", "scalar"):
-        from bench_sim.errors import BenchSimError
-
-        raise BenchSimError(
-            f"render.variant = {prefer!r}: allowed 'auto', 'cuda', 'llvm', 'scalar' or a variant name"
-        )
+    forced = f"{source} = {prefer!r}"
 
     def pick(kind: str) -> str:
         return explicit_variant or variant_for(kind, mode)
@@ -293,21 +396,28 @@ def choose_backend(
         probes["cuda"] = res.detail
         if res.ok:
             return BackendChoice(pick("cuda"), "cuda", None, "CUDA backend works", probes)
-    if wanted in ("auto", "llvm", "cuda"):
+        if wanted == "cuda":
+            raise BenchSimError(
+                f"{forced}: the CUDA backend cannot run here ({res.detail}); use 'auto' "
+                "(CUDA, else LLVM, else scalar) or 'llvm'"
+            )
+    if wanted in ("auto", "llvm"):
         for path in candidates():
             res = llvm_probe(path)
             probes[path] = ("ok: " if res.ok else "rejected: ") + res.detail
             if res.ok:
                 return BackendChoice(
-                    pick("llvm") if wanted != "cuda" else variant_for("llvm", mode),
-                    "llvm",
-                    path,
-                    f"libLLVM at {path} passed the probe",
-                    probes,
+                    pick("llvm"), "llvm", path, f"libLLVM at {path} passed the probe", probes
                 )
+        if wanted == "llvm":
+            tried = "; ".join(f"{p}: {d}" for p, d in probes.items() if p != "cuda") or "none found"
+            raise BenchSimError(
+                f"{forced}: no libLLVM passed the probe ({tried[:300]}); install Debian's libllvm19 "
+                "or use 'auto' or 'scalar'"
+            )
     reason = "no working CUDA device and no libLLVM passed the probe"
     if wanted == "scalar":
-        reason = "scalar variant requested"
+        reason = f"scalar variant requested ({source})"
     else:
         warnings.warn(
             f"bench_sim: {reason}; falling back to the slow scalar variant "
@@ -327,29 +437,40 @@ def choose_backend(
 _ACTIVE: BackendChoice | None = None
 
 
-def init_mitsuba(prefer: str = "auto", mode: str = "mono") -> tuple[Any, BackendChoice]:
-    """Choose the backend (once per process), set ``DRJIT_LIBLLVM_PATH``, import Mitsuba and set
-    its variant. Returns ``(mitsuba module, choice)``.
-
-    A later call with another mode switches the variant on the same backend kind.
-    """
+def select_backend(prefer: str = "auto", mode: str = "mono") -> BackendChoice:
+    """Choose the backend for this process without importing Mitsuba (the up-front check of a
+    command): once per process, again only when a different kind is forced later. Sets
+    ``DRJIT_LIBLLVM_PATH`` for the chosen library. Raises :class:`BenchSimError` (one line) for
+    an unknown name or a forced backend that cannot run."""
     global _ACTIVE
-    if _ACTIVE is None:
-        if "mitsuba" in sys.modules and os.environ.get(ENV_LLVM) is None:
-            warnings.warn(
-                "bench_sim: mitsuba was imported before the backend was chosen", RuntimeWarning,
-                stacklevel=2,
-            )
-        choice = choose_backend(prefer, mode)
-        if choice.llvm_path is not None:
-            os.environ[ENV_LLVM] = choice.llvm_path
-        _ACTIVE = choice
-    else:
+    prefer, source = resolve_preference(prefer)
+    check_variant_name(prefer, mode, source)
+    wanted_kind = prefer.split("_", 1)[0]
+    if _ACTIVE is not None and wanted_kind in ("auto", _ACTIVE.kind):
         choice = _ACTIVE
-        wanted = variant_for(choice.kind, mode) if "_" not in prefer else prefer
+        wanted = prefer if "_" in prefer else variant_for(choice.kind, mode)
         if wanted != choice.variant:
             choice = BackendChoice(wanted, choice.kind, choice.llvm_path, choice.reason, choice.probes)
             _ACTIVE = choice
+        return choice
+    choice = choose_backend(prefer, mode, source=source)
+    if choice.llvm_path is not None:  # the probed library, even over a user's failing one
+        os.environ[ENV_LLVM] = choice.llvm_path
+    _ACTIVE = choice
+    return choice
+
+
+def init_mitsuba(prefer: str = "auto", mode: str = "mono") -> tuple[Any, BackendChoice]:
+    """Choose the backend (:func:`select_backend`), import Mitsuba and set its variant.
+    Returns ``(mitsuba module, choice)``.
+
+    A later call with another mode switches the variant on the same backend kind.
+    """
+    if _ACTIVE is None and "mitsuba" in sys.modules and os.environ.get(ENV_LLVM) is None:
+        warnings.warn(
+            "bench_sim: mitsuba was imported before the backend was chosen", RuntimeWarning, stacklevel=2
+        )
+    choice = select_backend(prefer, mode)
     import mitsuba as mi
 
     if mi.variant() != choice.variant:

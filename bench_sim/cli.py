@@ -1,48 +1,239 @@
 """The ``bench-sim`` command.
 
-Every sub-command validates its inputs first and prints a bad config, file or argument as one
-line on stderr (exit status 2), without writing any output. Heavy modules are imported inside
-the commands so ``bench-sim --help`` stays instant.
+Every sub-command validates its inputs first (config, arguments, input files, output folder,
+the memory and disk the run needs) and only then computes. The group class :class:`_BenchSimGroup`
+gives every command, including those added later, the same behaviour towards the user:
+
+* a bad config, file, argument or environment (:class:`~bench_sim.errors.BenchSimError`) and a
+  usage error (unknown option, bad value) are one line on stderr, exit status 2;
+* Ctrl-C (or ``SIGTERM``) is one line, exit status 130 (143), and leaves no partial output (the
+  output sets of :mod:`bench_sim.io` remove their temporaries);
+* a warning (:class:`~bench_sim.errors.ConfigWarning` and others) is one line, the run goes on;
+* anything else is a bug: one line naming it, exit status 1.
+
+No traceback reaches the user unless ``BENCH_SIM_DEBUG=1`` (then it is printed before the line).
+Heavy modules are imported inside the commands so ``bench-sim --help`` stays instant.
 """
 
 from __future__ import annotations
 
-import functools
+import contextlib
+import os
+import signal
 import sys
-from collections.abc import Callable
+import traceback
+import warnings
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, TypeVar
 
 import typer
+from typer.core import TyperGroup
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, TRA_METHODS
 from bench_sim.errors import BenchSimError
 
+try:  # typer >= 0.22 carries its own copy of click
+    from typer._click import exceptions as _click_exc
+except ImportError:  # pragma: no cover - older typer on click
+    from click import exceptions as _click_exc  # type: ignore[no-redef]
+
+__all__ = ["app", "main", "parse_stages", "guarded"]
+
+PROG = "bench-sim"
+#: exit status of a user error, of Ctrl-C (128 + SIGINT) and of SIGTERM (128 + SIGTERM)
+EXIT_USER, EXIT_INTERRUPT, EXIT_TERM, EXIT_BUG = 2, 130, 143, 1
+
+T = TypeVar("T")
+
+
+def _debug() -> bool:
+    return os.environ.get("BENCH_SIM_DEBUG") == "1"
+
+
+def _say(kind: str, text: str) -> None:
+    """One line on stderr: ``bench-sim: KIND: TEXT`` (whitespace and newlines collapsed)."""
+    line = " ".join(str(text).split()) or "(no message)"
+    print(f"{PROG}: {kind}: {line}", file=sys.stderr, flush=True)
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so output sets clean up as for Ctrl-C."""
+
+
+@contextlib.contextmanager
+def _one_line_warnings() -> Iterator[None]:
+    """Show each warning as one line (``bench-sim: warning: ...``), once per message."""
+    if _debug():
+        yield
+        return
+    seen: set[str] = set()
+
+    def show(message: Any, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        text = str(message).removeprefix("bench_sim: ")
+        if text not in seen:
+            seen.add(text)
+            prefix = "" if issubclass(category, UserWarning) else f"{category.__name__}: "
+            _say("warning", prefix + text)
+
+    with warnings.catch_warnings():  # restores the filters and showwarning on the way out
+        warnings.simplefilter("default")
+        warnings.showwarning = show
+        yield
+
+
+@contextlib.contextmanager
+def _sigterm_as_exception() -> Iterator[None]:
+    def handler(signum: int, frame: Any) -> None:
+        raise _Terminated()
+
+    try:
+        old = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def guarded(func: Callable[[], T]) -> T:
+    """Run a command body with the CLI's contract (see the module docstring): exceptions become
+    one line and an exit status (:class:`typer.Exit`); usage errors pass through to the group."""
+    try:
+        with _one_line_warnings(), _sigterm_as_exception():
+            return func()
+    except (typer.Exit, typer.Abort, _click_exc.ClickException):
+        raise
+    except BenchSimError as exc:
+        if _debug():
+            traceback.print_exc()
+        _say("error", str(exc) or type(exc).__name__)
+        raise typer.Exit(EXIT_USER) from None
+    except KeyboardInterrupt:
+        if _debug():
+            traceback.print_exc()
+        _say("interrupted", f"stopped by Ctrl-C; {_NOTHING_LEFT}")
+        raise typer.Exit(EXIT_INTERRUPT) from None
+    except _Terminated:
+        _say("terminated", f"stopped by SIGTERM; {_NOTHING_LEFT}")
+        raise typer.Exit(EXIT_TERM) from None
+    except MemoryError as exc:
+        if _debug():
+            traceback.print_exc()
+        _say("error", f"out of memory ({exc or 'MemoryError'}); lower lines, sensor.columns or --frames")
+        raise typer.Exit(EXIT_USER) from None
+    except BrokenPipeError:  # the reader went away (``| head``): nothing to say to it
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        raise typer.Exit(EXIT_BUG) from None
+    except OSError as exc:  # the environment: a file that cannot be read or written
+        if _debug():
+            traceback.print_exc()
+        where = f"{exc.filename}: " if exc.filename else ""
+        _say("error", f"{where}{exc.strerror or exc}")
+        raise typer.Exit(EXIT_USER) from None
+    except Exception as exc:
+        cause = _interruption(exc)
+        if cause is not None:  # Ctrl-C inside a C extension (an import), re-raised wrapped
+            _say(*cause)
+            raise typer.Exit(EXIT_INTERRUPT if cause[0] == "interrupted" else EXIT_TERM) from None
+        if _debug():
+            raise
+        first = " ".join(str(exc).split())[:300]
+        _say(
+            "internal error",
+            f"{type(exc).__name__}: {first} (a bug in bench_sim; BENCH_SIM_DEBUG=1 shows the traceback)",
+        )
+        raise typer.Exit(EXIT_BUG) from None
+
+
+_NOTHING_LEFT = "no partial output was left (an earlier complete output is kept)"
+
+
+def _interruption(exc: BaseException) -> tuple[str, str] | None:
+    """The interruption (Ctrl-C, SIGTERM) an exception was raised from, if any, as the line to
+    print: a signal that arrives while C code runs (an import) can come back wrapped, e.g. as
+    ``SystemError: ... returned a result with an exception set``."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        seen.add(id(cur))
+        if isinstance(cur, KeyboardInterrupt):
+            return "interrupted", f"stopped by Ctrl-C; {_NOTHING_LEFT}"
+        if isinstance(cur, _Terminated):
+            return "terminated", f"stopped by SIGTERM; {_NOTHING_LEFT}"
+        cur = cur.__cause__ or cur.__context__
+    return None
+
+
+def _given(exc: Exception, args: Any) -> str:
+    """`` (got 'VALUE')`` for a bad option value, found in the command line (click's message
+    names the option but not the value)."""
+    param = getattr(exc, "param", None)
+    opts = list(getattr(param, "opts", ()) or ())
+    argv = list(args) if args is not None else sys.argv[1:]
+    for i, tok in enumerate(argv):
+        for opt in opts:
+            if tok == opt and i + 1 < len(argv):
+                return f" (got {argv[i + 1]!r})"
+            if tok.startswith(opt + "="):
+                return f" (got {tok[len(opt) + 1:]!r})"
+    return ""
+
+
+class _BenchSimGroup(TyperGroup):
+    """The command group: every sub-command runs :func:`guarded`; usage errors are one line."""
+
+    def invoke(self, ctx: Any) -> None:
+        # a command's return value is not an exit status (as in click's standalone mode)
+        guarded(lambda: super(_BenchSimGroup, self).invoke(ctx))
+
+    def main(self, args: Any = None, prog_name: Any = None, complete_var: Any = None,
+             standalone_mode: bool = True, **extra: Any) -> Any:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        try:
+            rv = super().main(args, PROG, complete_var, standalone_mode=False, **extra)
+        except _click_exc.NoArgsIsHelpError as exc:
+            exc.show()
+            sys.exit(exc.exit_code)
+        except _click_exc.ClickException as exc:
+            ctx = getattr(exc, "ctx", None)
+            path = ctx.command_path if ctx is not None else PROG
+            sub = path.split(" ", 1)[1] + ": " if " " in path else ""
+            hint = f" (see '{path} --help')" if isinstance(exc, _click_exc.UsageError) else ""
+            _say("error", f"{sub}{exc.format_message()}{_given(exc, args)}{hint}")
+            sys.exit(exc.exit_code)
+        except (typer.Abort, EOFError):
+            _say("interrupted", "aborted")
+            sys.exit(EXIT_INTERRUPT)
+        except KeyboardInterrupt:  # Ctrl-C while parsing, before a command runs
+            _say("interrupted", "stopped by Ctrl-C; nothing was written")
+            sys.exit(EXIT_INTERRUPT)
+        sys.exit(rv if isinstance(rv, int) else 0)  # an int here is typer.Exit's status
+
+
 app = typer.Typer(
+    cls=_BenchSimGroup,
     add_completion=False,
     no_args_is_help=True,
+    pretty_exceptions_enable=False,
     help="bench_sim: optical test-bench simulator for HDR push-broom imaging with digital TDI.",
 )
 
 ConfigArg = Annotated[
     Path, typer.Argument(help="bench config (TOML)", show_default="scenes/paper_rig.toml")
 ]
-SeedOpt = Annotated[int, typer.Option("--seed", help="seed of the run's one random generator")]
+SeedOpt = Annotated[int, typer.Option("--seed", help="seed of the run's one random generator (0..2**63-1)")]
 
 
 def _user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn a :class:`BenchSimError` into one line on stderr and exit status 2."""
-
-    @functools.wraps(func)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except BenchSimError as exc:
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            print(f"bench-sim: error: {msg}", file=sys.stderr)
-            raise typer.Exit(2) from None
-
-    return wrapper
+    """Kept for commands written against the former per-command wrapper: the group
+    (:class:`_BenchSimGroup`) now gives every command the error contract, so this returns
+    ``func`` unchanged."""
+    return func
 
 
 def parse_stages(text: str, max_stage: int | None = None) -> list[int]:
@@ -73,10 +264,13 @@ def parse_stages(text: str, max_stage: int | None = None) -> list[int]:
 
 
 @app.command()
-@_user_errors
 def doctor() -> None:
-    """Print the chosen Mitsuba variant, the LLVM library and why, and versions."""
+    """Print the chosen Mitsuba variant, the LLVM library and why, memory, and versions.
+
+    A variant forced by ``BENCH_SIM_VARIANT`` that cannot run here is one line, exit status 2."""
     from bench_sim.backend import choose_backend, versions
+    from bench_sim.io import format_bytes
+    from bench_sim.resources import available_memory_bytes
 
     choice = choose_backend()
     print(f"variant     : {choice.variant} ({choice.kind})")
@@ -84,12 +278,13 @@ def doctor() -> None:
     print(f"why         : {choice.reason}")
     for what, detail in choice.probes.items():
         print(f"  probe {what}: {detail}")
+    mem = available_memory_bytes()
+    print(f"memory      : {format_bytes(mem[0]) + ' available (' + mem[1] + ')' if mem else 'unknown'}")
     for pkg, ver in versions().items():
         print(f"{pkg:<12}: {ver}")
 
 
 @app.command()
-@_user_errors
 def render(
     config: ConfigArg = DEFAULT_CONFIG_PATH,
     frames: Annotated[int, typer.Option("--frames", help="line periods to render")] = 8,
@@ -103,14 +298,10 @@ def render(
     from bench_sim.config import load_config
     from bench_sim.experiments.render_job import run_render
 
-    cfg = load_config(config)
-    if engine is not None and engine not in ("fast", "reference"):
-        raise BenchSimError(f"--engine = {engine!r}: allowed 'fast' or 'reference'")
-    run_render(cfg, frames=frames, engine=engine, seed=seed, out=out)
+    run_render(load_config(config), frames=frames, engine=engine, seed=seed, out=out)
 
 
 @app.command()
-@_user_errors
 def ptc(
     config: ConfigArg = DEFAULT_CONFIG_PATH,
     stages: Annotated[str, typer.Option("--stages", help="e.g. 1,10,80")] = "1,10,80",
@@ -126,7 +317,6 @@ def ptc(
 
 
 @app.command()
-@_user_errors
 def fuse(
     low: Annotated[Path, typer.Argument(help="stage-mu1 image (TIFF/PNG 16-bit, EXR or NPY)")],
     high: Annotated[Path, typer.Argument(help="stage-mu2 image, same shape")],
@@ -157,7 +347,6 @@ def fuse(
 
 
 @app.command()
-@_user_errors
 def reproduce(
     config: ConfigArg = DEFAULT_CONFIG_PATH,
     seed: SeedOpt = 0,
@@ -173,7 +362,6 @@ def reproduce(
 
 
 @app.command()
-@_user_errors
 def simulate(
     config: ConfigArg = DEFAULT_CONFIG_PATH,
     stages: Annotated[str, typer.Option("--stages", help="'all' or stages like 10,80")] = "10,80",
@@ -248,6 +436,7 @@ def sweep(
 
 
 def main() -> None:  # pragma: no cover
+    """Run the command line (the ``bench-sim`` script is :func:`bench_sim.__main__.main`)."""
     app()
 
 

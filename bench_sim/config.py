@@ -6,7 +6,11 @@ Unknown keys are rejected. A TOML file may name a ``base`` file (relative to its
 values it overrides, which is how the lighting presets in ``scenes/`` are built.
 
 Errors are raised as :class:`ConfigError` with one line naming the file, the key, the value and
-what is allowed.
+what is allowed. Every float of every section must be finite (``inf``/``nan`` are refused by the
+base section model, so sections added later are covered too); combinations the physics cannot
+mean are refused (:meth:`BenchConfig._cross`), and odd-but-legal ones are reported by
+:func:`config_warnings` (issued as :class:`~bench_sim.errors.ConfigWarning` when a user's config
+is loaded: :func:`load_config`, :func:`warn_config`), with the numbers.
 """
 
 from __future__ import annotations
@@ -14,12 +18,13 @@ from __future__ import annotations
 import math
 import re
 import tomllib
+import warnings
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from bench_sim.errors import BenchSimError
+from bench_sim.errors import BenchSimError, ConfigWarning
 
 __all__ = [
     "ConfigError",
@@ -52,6 +57,8 @@ __all__ = [
     "config_to_toml_dict",
     "config_sha256",
     "config_to_toml_text",
+    "config_warnings",
+    "warn_config",
 ]
 
 #: The scenes shipped inside the package (``scenes/`` in a source checkout links here).
@@ -102,7 +109,10 @@ class ConfigError(BenchSimError):
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    """Base of every config section: unknown keys refused, immutable, and every float finite
+    (``allow_inf_nan=False`` applies to floats anywhere in a section, in tuples too)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False)
 
 
 class DrumConfig(_Section):
@@ -261,11 +271,6 @@ class TargetConfig(_Section):
 Vec3 = tuple[float, float, float]
 
 
-def _check_vec3(name: str, value: Vec3) -> None:
-    if not all(math.isfinite(v) for v in value):
-        raise ValueError(f"{name} = {list(value)}: every component must be finite")
-
-
 class _LightBase(_Section):
     """What every light has: a switch, a physical level, a spectrum and a temporal modulation.
 
@@ -320,8 +325,6 @@ class SpotLightConfig(_LightBase):
 
     @model_validator(mode="after")
     def _beam(self) -> SpotLightConfig:
-        _check_vec3("position_m", self.position_m)
-        _check_vec3("aim_m", self.aim_m)
         if self.beam_width_deg > self.cutoff_deg:
             raise ValueError(
                 f"beam_width_deg = {self.beam_width_deg} must not exceed cutoff_deg = "
@@ -360,7 +363,6 @@ class DirectionalLightConfig(_LightBase):
 
     @model_validator(mode="after")
     def _direction(self) -> DirectionalLightConfig:
-        _check_vec3("direction", self.direction)
         if not any(self.direction):
             raise ValueError("direction = [0, 0, 0]: needs a non-zero vector (the way the light travels)")
         return self
@@ -380,8 +382,6 @@ class PointLightConfig(_LightBase):
 
     @model_validator(mode="after")
     def _points(self) -> PointLightConfig:
-        _check_vec3("position_m", self.position_m)
-        _check_vec3("reference_m", self.reference_m)
         if self.position_m == self.reference_m:
             raise ValueError(
                 f"position_m = reference_m = {list(self.reference_m)}: the reference point must lie "
@@ -408,8 +408,6 @@ class AreaLightConfig(_LightBase):
 
     @model_validator(mode="after")
     def _points(self) -> AreaLightConfig:
-        _check_vec3("position_m", self.position_m)
-        _check_vec3("aim_m", self.aim_m)
         if self.position_m == self.aim_m:
             raise ValueError(
                 f"position_m = aim_m = {list(self.aim_m)}: the panel must not sit on its aim point"
@@ -530,6 +528,16 @@ class SensorConfig(_Section):
     column_fpn: bool = True
     quantization: bool = True
 
+    @model_validator(mode="after")
+    def _black_below_adc_top(self) -> SensorConfig:
+        top = 2**self.adc_bits - 1
+        if self.black_offset_dn >= top:
+            raise ValueError(
+                f"black_offset_dn = {self.black_offset_dn} is at or above the top of the "
+                f"{self.adc_bits}-bit ADC ({top} DN): no signal could be recorded; it must be below {top}"
+            )
+        return self
+
 
 class TimingConfig(_Section):
     """Line period and integration time. The drum speed follows from them (see rig.geometry)."""
@@ -601,6 +609,13 @@ class RenderConfig(_Section):
     bsdf_samples: Annotated[int, Field(ge=1, le=64)] = 1
     weak_sampling_weight: Annotated[float, Field(gt=0, le=1)] = 1e-3
 
+
+    @model_validator(mode="after")
+    def _variant(self) -> RenderConfig:
+        from bench_sim.backend import check_variant_name
+
+        check_variant_name(self.variant, "spectral" if self.spectral else "mono", "variant")
+        return self
 
     @model_validator(mode="after")
     def _band(self) -> RenderConfig:
@@ -675,14 +690,60 @@ class BenchConfig(_Section):
                 raise ValueError("sensor.qe_curve: relative QE values must lie in 0..1")
         if not math.isfinite(self.lens.magnification):
             raise ValueError("lens magnification is not finite")
+        for name, light in self.lights.items():
+            pos = getattr(light, "position_m", None)
+            if light.enabled and pos is not None and math.hypot(pos[1], pos[2]) <= self.drum.radius_m:
+                raise ValueError(
+                    f"lights.{name}.position_m = {list(pos)} lies inside the drum (drum.radius_m = "
+                    f"{self.drum.radius_m} around the x axis): it could light nothing; move it outside"
+                )
+        from bench_sim.sensor.model import dark_electrons, pixel_saturation_electrons
+
+        dark_e = dark_electrons(self.sensor, self.timing.t_int_s)
+        clip_e = pixel_saturation_electrons(self.sensor)
+        if dark_e >= clip_e:
+            raise ValueError(
+                f"sensor.dark_current_e_s = {self.sensor.dark_current_e_s} over t_int = "
+                f"{self.timing.t_int_s:g} s gives {dark_e:.4g} dark e- per read, at or above the "
+                f"pixel's clip ({clip_e:.4g} e-: full well or ADC top): every pixel saturates in the "
+                "dark; lower the dark current or the integration time"
+            )
         return self
 
 
+def config_warnings(cfg: BenchConfig) -> list[str]:
+    """Legal but odd settings of ``cfg``, one line each with the numbers (empty if none).
+
+    - ``dtdi.beta_bits`` narrower than one pixel: the word's room above the pedestal,
+      ``2**beta - 1 - P``, is less than what one read adds to a stage sum (``2**adc_bits - 1``,
+      less the black offset when it is subtracted), so even stage 1 clips on the word.
+    """
+    from bench_sim.sensor.model import pixel_saturation_dn, word_clip_dn
+
+    out: list[str] = []
+    s, d = cfg.sensor, cfg.dtdi
+    room = word_clip_dn(d.beta_bits) - d.pedestal_dn
+    read = pixel_saturation_dn(s) - (s.black_offset_dn if d.subtract_black else 0.0)
+    if room < read:
+        out.append(
+            f"dtdi.beta_bits = {d.beta_bits}: the word holds {room:g} DN above the {d.pedestal_dn} DN "
+            f"pedestal, less than one pixel read can add ({read:g} DN: sensor.adc_bits = {s.adc_bits}"
+            f"{', black subtracted' if d.subtract_black else ''}): every stage clips on the word at "
+            f"{100 * room / read:.0f} % of one pixel's range or less; widen beta_bits to at least "
+            f"{math.ceil(math.log2(read + d.pedestal_dn + 1))}"
+        )
+    return out
+
+
 def _format_loc(loc: tuple[int | str, ...]) -> str:
+    """``('lights', 'strong', 'spot', 'position_m', 0)`` -> ``lights.strong.position_m[0]``."""
     parts = [p for p in loc if not (isinstance(p, str) and p.startswith("function-"))]
     if len(parts) > 2 and parts[0] == "lights" and parts[2] in LIGHT_KINDS:
         del parts[2]  # the union's tag (the light's kind) is not a key of the file
-    return ".".join(str(p) for p in parts)
+    out = ""
+    for p in parts:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else p)
+    return out
 
 
 def _lookup(data: Any, loc: tuple[int | str, ...]) -> Any:
@@ -707,10 +768,14 @@ def _validation_message(exc: ValidationError, data: dict[str, Any], source: str)
     value = err.get("input") if loc else None
     if loc and value is None:
         value = _lookup(data, loc)
+    msg = " ".join(msg.removeprefix("Value error, ").split())
     if isinstance(value, dict) or not loc:
         where = f"{key}: " if loc else ""
-        return f"config error: {source}: {where}{msg.removeprefix('Value error, ')}"
-    return f"config error: {source}: {key} = {value!r}: {msg.removeprefix('Value error, ')}"
+        return f"config error: {source}: {where}{msg}"
+    shown = repr(value)
+    if len(shown) > 60:
+        shown = shown[:40] + "..." + shown[-12:]
+    return f"config error: {source}: {key} = {shown}: {msg}"
 
 
 def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -724,14 +789,29 @@ def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 
 def _read_toml(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
+    if path.is_dir():
+        raise ConfigError(f"config error: {path}: is a folder, not a TOML file")
     if not path.is_file():
         raise ConfigError(f"config error: {path}: no such file")
     if path in chain:
         raise ConfigError(f"config error: {path}: 'base' chain loops back to itself")
     try:
-        data = tomllib.loads(path.read_text())
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"config error: {path}: cannot read it ({exc.strerror})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"config error: {path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
+            "a config is a TOML text file in UTF-8"
+        ) from None
+    if "\x00" in text:
+        raise ConfigError(f"config error: {path}: holds NUL bytes (a binary file?); a config is TOML text")
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"config error: {path}: not valid TOML ({exc})") from exc
+        raise ConfigError(f"config error: {path}: not valid TOML ({' '.join(str(exc).split())})") from None
     image = data.get("target", {}).get("image") if isinstance(data.get("target"), dict) else None
     if isinstance(image, str) and image and not Path(image).is_absolute():
         data["target"]["image"] = str((path.parent / image).resolve())  # relative to this file
@@ -744,19 +824,36 @@ def _read_toml(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
     return _deep_merge(base_data, data)
 
 
-def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> BenchConfig:
-    """Validate a plain dict (as parsed from TOML) into a :class:`BenchConfig`."""
+def config_from_dict(data: dict[str, Any], source: str = "<dict>", *, warn: bool = False) -> BenchConfig:
+    """Validate a plain dict (as parsed from TOML) into a :class:`BenchConfig`.
+
+    With ``warn``, each line of :func:`config_warnings` is issued as a
+    :class:`~bench_sim.errors.ConfigWarning` (a user's config; not the configs the code derives).
+    """
+    if not isinstance(data, dict):
+        raise ConfigError(f"config error: {source}: expected a table of settings, got {type(data).__name__}")
     try:
-        return BenchConfig.model_validate(data)
+        cfg = BenchConfig.model_validate(data)
     except ValidationError as exc:
         raise ConfigError(_validation_message(exc, data, source)) from None
+    if warn:
+        warn_config(cfg, source)
+    return cfg
+
+
+def warn_config(cfg: BenchConfig, source: str) -> None:
+    """Issue each line of :func:`config_warnings` as a :class:`~bench_sim.errors.ConfigWarning`
+    (``source``: the file or argument the config came from)."""
+    for line in config_warnings(cfg):
+        warnings.warn(f"{source}: {line}", ConfigWarning, stacklevel=3)
 
 
 def load_config(path: str | Path | None = None) -> BenchConfig:
-    """Load and validate a bench config from TOML (default: ``scenes/paper_rig.toml``)."""
+    """Load and validate a bench config from TOML (default: ``scenes/paper_rig.toml``); its odd
+    but legal settings are warned about (:func:`config_warnings`)."""
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     p = p.resolve()
-    return config_from_dict(_read_toml(p), source=str(p))
+    return config_from_dict(_read_toml(p), source=str(p), warn=True)
 
 
 def with_overrides(cfg: BenchConfig, overrides: dict[str, Any], source: str = "<overrides>") -> BenchConfig:

@@ -1,25 +1,50 @@
-"""File input/output with metadata: atomic writes, EXR, TIFF, PNG, NPY, JSON, CSV, text and
-EMVA 1288 descriptor files.
+"""File input/output with metadata: atomic writes, output sets, EXR, TIFF, PNG, NPY, JSON, CSV,
+text and EMVA 1288 descriptor files.
 
 Every file carries its provenance in one format (the dict of
 :func:`bench_sim.experiments.provenance.provenance`: ``version``, ``seed``, ``config_sha256``,
 ``config``): as a JSON attribute (EXR header, TIFF ImageDescription, PNG ``tEXt`` chunk
 ``bench_sim``), as ``#`` comment lines (CSV, EMVA descriptors), or as keys (JSON).
 
-Every writer goes through :func:`atomic_path`: the file is written under a temporary name in the
-destination folder and renamed into place only when complete, so a failure never leaves a
-partial output behind.
+Writing
+-------
+* :func:`atomic_path`: one file, written under a temporary name beside it and renamed into place
+  when complete.
+* :func:`output_set`: the files of a command, written into a temporary folder beside the output
+  folder; the completion record (:data:`OUTPUT_MARKER`) is written last and the folder replaces
+  the output folder whole (an atomic exchange where the file system has one), so a rerun never
+  mixes old and new files and an interrupted run leaves the previous complete set or nothing.
+* :func:`output_files`: the same for a few loose files (``bench-sim fuse``).
+
+A write that fails for want of room or permission (``ENOSPC``, ``EDQUOT``, ``EFBIG``, ``EROFS``,
+``EACCES``, and the C writers' own reports of them) becomes one :class:`OutputWriteError` line;
+the temporaries are removed first. Temporaries are named ``.NAME.partial-PID-XXXX``; a set's
+folder holds an ``flock`` while its run lives. A killed run's temporaries (``SIGKILL`` leaves
+them: unlocked, their process gone, or older than a minute with their process's number reused)
+are removed by the next run writing there, and a set moved aside just before a kill is put back.
+
+Fault injection (tests): ``BENCH_SIM_FAULT=KIND@POINT`` makes this process fail at ``POINT``:
+``N`` (the N-th file written through :func:`atomic_path`, after its temporary file is written,
+before the rename) or ``commit`` (an output set complete, its record written, before the
+rename); ``KIND`` is ``enospc`` (raise ``OSError(ENOSPC)``), ``sigint``, ``sigterm`` or
+``sigkill`` (the process signals itself).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import errno
+import glob
 import hashlib
 import json
 import os
+import re
 import shutil
+import signal
 import tempfile
-from collections.abc import Iterator, Mapping
+import time
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,12 +52,22 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not on POSIX
+    fcntl = None  # type: ignore[assignment]
+
 __all__ = [
     "atomic_path",
     "output_set",
+    "output_files",
     "check_output_dir",
+    "check_output_file",
     "check_free_space",
     "format_bytes",
+    "read_output_record",
+    "write_failure",
+    "OutputWriteError",
     "OUTPUT_MARKER",
     "write_json",
     "read_json",
@@ -46,6 +81,7 @@ __all__ = [
     "write_csv",
     "write_emva_descriptor",
     "read_image",
+    "image_shape",
     "sha256_text",
     "ImageReadError",
 ]
@@ -55,33 +91,66 @@ class ImageReadError(BenchSimError):
     """An input image file that cannot be read or is not of a supported kind."""
 
 
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
-
-    The temporary file keeps the destination's suffix (some writers choose the format from it).
-    On any exception the temporary file is removed and ``path`` is left untouched.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp creates 0600; give the usual permissions
-        os.replace(tmp_path, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
-        raise
+class OutputWriteError(BenchSimError):
+    """An output that could not be written (no room, no permission): one line; nothing written."""
 
 
 #: File written last into every output folder made by :func:`output_set`; its presence marks a
 #: complete set, and only folders holding it (or empty ones) are ever replaced by a rerun.
 OUTPUT_MARKER = ".bench-sim-output.json"
+
+#: errno values of a write that fails for want of room or permission
+WRITE_ERRNOS = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO}
+)
+#: how the C writers (OpenEXR, HDF5/netCDF, ...) word the same failures
+_WRITE_FAILURE_TEXTS = (
+    "no space left", "file too large", "disk quota", "read-only file system", "permission denied",
+    "failed to write", "hdf error", "write error", "input/output error", "requested and",
+)
+#: a temporary younger than this whose process is alive may not have taken its lock yet [s]
+_LOCK_GRACE_S = 60.0
+
+# --- fault injection (see the module docstring) ---------------------------------------------------
+
+_FILES_WRITTEN = 0
+
+
+def _fault(point: str, path: Path) -> None:
+    spec = os.environ.get("BENCH_SIM_FAULT", "")
+    kind, _, at = spec.partition("@")
+    if not spec or at != point:
+        return
+    if kind == "enospc":
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+    sig = {"sigint": signal.SIGINT, "sigterm": signal.SIGTERM, "sigkill": signal.SIGKILL}.get(kind)
+    if sig is not None:
+        os.kill(os.getpid(), sig)
+        time.sleep(1.0)  # the handler runs here (or the process is gone)
+
+
+def _file_written(path: Path) -> None:
+    global _FILES_WRITTEN
+    _FILES_WRITTEN += 1
+    _fault(str(_FILES_WRITTEN), path)
+
+
+#: temporary folders of the output sets being written by this process (a write failure inside
+#: one is reported by the set, naming its ``--out``)
+_OPEN_SETS: list[Path] = []
+
+
+def _in_open_set(path: Path) -> bool:
+    return any(path.is_relative_to(t) for t in _OPEN_SETS)
+
+
+# --- temporaries and their locks ---------------------------------------------------------------------
+
+
+def _lock(fd: int) -> None:
+    if fcntl is not None:
+        with contextlib.suppress(OSError):
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
 
 
 def _pid_alive(pid: int) -> bool:
@@ -94,41 +163,253 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _is_stale(path: Path, pid: int) -> bool:
+    """Whether the temporary ``path`` of process ``pid`` was left by a dead run: nobody holds
+    its lock (folders), and its process is gone or, if a process of that number lives, the
+    temporary is older than the grace time."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        if fcntl is not None and path.is_dir():  # a set's folder: its run holds the lock
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                return False  # its run holds the lock: alive
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        if not _pid_alive(pid):
+            return True
+        return time.time() - os.fstat(fd).st_mtime > _LOCK_GRACE_S
+    finally:
+        os.close(fd)
+
+
+def _temporaries(folder: Path, name: str) -> Iterator[tuple[Path, str, int]]:
+    """``(path, kind, pid)`` of the temporaries of ``name`` in ``folder``."""
+    try:
+        entries = list(folder.glob(f".{glob.escape(name)}.*-*"))
+    except OSError:
+        return
+    for cand in entries:
+        parts = cand.name[len(name) + 2 :].split("-")
+        if len(parts) >= 2 and parts[0] in ("partial", "old") and parts[1].isdigit():
+            yield cand, parts[0], int(parts[1])
+
+
 def _remove_stale_temporaries(out: Path) -> None:
-    """Remove ``.NAME.partial-PID-*`` / ``.NAME.old-PID-*`` folders beside ``out`` whose process
-    is gone (left by a killed run)."""
-    for cand in out.parent.glob(f".{out.name}.*-*"):
-        parts = cand.name[len(out.name) + 2 :].split("-")
-        if len(parts) < 2 or parts[0] not in ("partial", "old") or not parts[1].isdigit():
+    """Remove the temporaries of ``out`` (``.NAME.partial-PID-*`` / ``.NAME.old-PID-*`` beside
+    it) left by killed runs. A set moved aside (``old``) while ``out`` is missing is put back."""
+    for cand, kind, pid in _temporaries(out.parent, out.name):
+        if not _is_stale(cand, pid):
             continue
-        if not _pid_alive(int(parts[1])):
+        if kind == "old" and (cand / "set").is_dir() and not out.exists():
+            with contextlib.suppress(OSError):
+                os.replace(cand / "set", out)
+        if cand.is_dir():
             shutil.rmtree(cand, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                cand.unlink()
+
+
+_RENAME_EXCHANGE = 2
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths atomically (Linux ``renameat2(RENAME_EXCHANGE)``); ``False`` where the
+    system or the file system has no such operation."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd = -100
+    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP, errno.EOPNOTSUPP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _display_name(path: Path) -> str:
+    """A file named for the user: relative to the output set it belongs to, without the
+    temporary's ``.NAME.partial-PID-XXXX`` decoration."""
+    inner = next((t for t in _OPEN_SETS if path.is_relative_to(t) and path != t), None)
+    parts = list(path.relative_to(inner).parts if inner else [path.name])
+    m = re.fullmatch(r"\.(.+)\.partial-\d+-.*", parts[-1])
+    if m:
+        parts[-1] = m.group(1)
+    return str(Path(*parts))
+
+
+def write_failure(
+    exc: BaseException, target: str | os.PathLike[str], what: str = "--out"
+) -> OutputWriteError | None:
+    """The one-line error for an exception raised while writing ``target``, if it is a write
+    failure (no room, no permission, a file size limit); ``None`` for anything else."""
+    if isinstance(exc, BenchSimError) or not isinstance(exc, Exception):
+        return None
+    code = exc.errno if isinstance(exc, OSError) else None
+    text = " ".join(str(exc).split())
+    if code in WRITE_ERRNOS:
+        reason = f"{os.strerror(code)} ({errno.errorcode[code]})"
+    elif isinstance(exc, OSError) or any(t in text.lower() for t in _WRITE_FAILURE_TEXTS):
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else text
+        # the C writers quote the (temporary) file: name it as the user knows it
+        reason = re.sub(r"/\S*\.partial-\d+-[^\s\"']*", lambda m: _display_name(Path(m.group(0))), reason)
+        if len(reason) > 200:
+            reason = reason[:80] + " ... " + reason[-115:]
+        reason = reason or type(exc).__name__
+        free = None
+        with contextlib.suppress(OSError):
+            p = Path(target)
+            while not p.exists() and p != p.parent:
+                p = p.parent
+            free = shutil.disk_usage(p).free
+        if free is not None and free < 1 << 20:
+            reason += f"; the disk is full ({free} bytes free)"
+    else:
+        return None
+    name = f" {_display_name(Path(str(exc.filename)))}" if isinstance(exc, OSError) and exc.filename else ""
+    return OutputWriteError(
+        f"{what} = {str(target)!r}: cannot write the output{name}: {reason}; nothing was written "
+        "(an earlier complete output there is kept)"
+    )
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+
+    The temporary file (``.NAME.partial-PID-XXXX.SUFFIX``) keeps the destination's suffix (some
+    writers choose the format from it). On any exception it is removed and ``path`` is left
+    untouched; a write failure (no room, no permission) becomes an :class:`OutputWriteError`.
+    """
+    path = Path(path)
+    try:
+        with _deferred_path(path) as (tmp, commit):
+            yield tmp
+            _file_written(path)
+            commit()
+    except BaseException as exc:
+        # inside an output set the set reports the failure, naming its --out
+        failure = None if _in_open_set(path) else write_failure(exc, path, path.name)
+        if failure is not None:
+            raise failure from None
+        raise
+
+
+def _nearest_existing(path: Path) -> Path:
+    p = path
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def _probe_writable(folder: Path, what: str, out: Path) -> None:
+    """Create and remove a temporary folder in ``folder`` (the real test: permissions, a
+    read-only file system, no inodes left)."""
+    try:
+        probe = tempfile.mkdtemp(prefix=".bench-sim-probe-", dir=folder)
+        os.rmdir(probe)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise OutputWriteError(f"{what} = {str(out)!r}: cannot write in {folder} ({reason})") from None
+
+
+#: files whose provenance marks a folder written by a bench_sim older than the completion record
+_LEGACY_RECORDS = ("metrics.json", "meta.json", "ptc_results.json")
+
+
+def _written_by_bench_sim(out: Path) -> bool:
+    """``out`` holds a bench_sim output set: its completion record, or (sets written before the
+    record existed) a JSON file carrying bench_sim's provenance."""
+    if (out / OUTPUT_MARKER).is_file():
+        return True
+    for name in _LEGACY_RECORDS:
+        try:
+            data = json.loads((out / name).read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(data, dict) and {"version", "config_sha256"} <= data.keys():
+            return True
+    return False
 
 
 def check_output_dir(out: str | os.PathLike[str], what: str = "--out") -> Path:
     """Check, before any computation, that ``out`` can receive an output set.
 
     Returns the resolved path. Raises :class:`BenchSimError` (one line) when ``out`` is a file,
-    lies under a file, is a non-empty folder that bench_sim did not write, or its parent is not
-    writable.
+    lies under a file, is a non-empty folder that bench_sim did not write, is the current folder
+    or one that holds it, or the folder that will hold it cannot be written.
     """
-    out = Path(out).expanduser().resolve()
+    given = str(out)
+    if not given.strip():
+        raise BenchSimError(f"{what} = {given!r}: empty; give a folder name")
+    if "\x00" in given:
+        raise BenchSimError(f"{what} = {given!r}: holds a NUL character")
+    try:
+        out = Path(out).expanduser().resolve()
+    except (OSError, RuntimeError) as exc:
+        raise BenchSimError(f"{what} = {given!r}: cannot resolve the path ({exc})") from None
     for anc in (out, *out.parents):
         if anc.exists():
-            if anc.is_file() or not anc.is_dir():
-                raise BenchSimError(f"{what} = {str(out)!r}: {anc} is a file, not a folder")
+            if not anc.is_dir():
+                raise BenchSimError(f"{what} = {given!r}: {anc} is a file, not a folder")
             break
-    if out.is_dir() and any(out.iterdir()) and not (out / OUTPUT_MARKER).is_file():
+    if out == out.parent or Path.cwd().resolve().is_relative_to(out):
         raise BenchSimError(
-            f"{what} = {str(out)!r}: folder exists, is not empty and was not written by bench_sim "
-            "(a rerun replaces the whole folder): choose a new or empty folder"
+            f"{what} = {given!r}: is the current folder or holds it (a rerun replaces the whole "
+            "folder): choose a new folder"
         )
-    parent = out.parent
-    while not parent.exists():
-        parent = parent.parent
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise BenchSimError(f"{what} = {str(out)!r}: {parent} is not writable")
+    if out.is_dir():
+        try:
+            busy = any(out.iterdir())
+        except OSError as exc:
+            raise BenchSimError(f"{what} = {given!r}: cannot list the folder ({exc.strerror})") from None
+        if busy and not _written_by_bench_sim(out):
+            raise BenchSimError(
+                f"{what} = {given!r}: folder exists, is not empty and was not written by bench_sim "
+                "(a rerun replaces the whole folder): choose a new or empty folder"
+            )
+    _probe_writable(_nearest_existing(out.parent), what, out)
     return out
+
+
+def check_output_file(path: str | os.PathLike[str], what: str, suffix: str) -> Path:
+    """Check, before any computation, that the file ``path`` (with ``suffix``) can be written:
+    not a folder, not under a file, its folder writable. Returns the absolute path."""
+    given = str(path)
+    p = Path(path).expanduser()
+    if p.suffix.lower() != suffix:
+        got = p.suffix or "no suffix"
+        raise BenchSimError(f"{what} = {given}: must be a {suffix} file (got '{got}')")
+    if p.is_dir():
+        raise BenchSimError(f"{what} = {given}: is a directory; give a {suffix} file name")
+    parent = _nearest_existing(p.absolute().parent)
+    if not parent.is_dir():
+        raise BenchSimError(f"{what} = {given}: {parent} is not a directory")
+    _probe_writable(parent, what, p)
+    return p.absolute()
+
+
+def read_output_record(out: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The completion record of the output set in ``out``; ``None`` if ``out`` holds no complete
+    set (readers of a folder written in place check it before trusting the files)."""
+    try:
+        data = json.loads((Path(out) / OUTPUT_MARKER).read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
 
 
 @contextlib.contextmanager
@@ -137,11 +418,13 @@ def output_set(
 ) -> Iterator[Path]:
     """Write a set of output files as one: yield a temporary folder, rename it onto ``out``.
 
-    The folder is created beside ``out`` (same file system) as ``.NAME.partial-PID-XXXX``. When
-    the block completes, :data:`OUTPUT_MARKER` (``record`` as JSON) is written last and the folder
-    replaces ``out`` whole: files of an earlier run never mix with the new ones. On any exception
+    The folder is created beside ``out`` (same file system) as ``.NAME.partial-PID-XXXX`` and
+    locked while this run lives. When the block completes, :data:`OUTPUT_MARKER` (``record`` as
+    JSON) is written last and the folder replaces ``out`` whole (an atomic exchange where the
+    file system has one): files of an earlier run never mix with the new ones. On any exception
     (Ctrl-C included) the temporary folder is removed and ``out`` keeps its previous complete set
-    (or stays absent). Temporaries of killed runs are removed by the next run.
+    (or stays absent); a write failure (no room, no permission) becomes an
+    :class:`OutputWriteError`. Temporaries of killed runs are removed by the next run.
 
     Parameters
     ----------
@@ -155,28 +438,100 @@ def output_set(
         Name of the option or argument for error messages.
     """
     out = check_output_dir(out, what)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    _remove_stale_temporaries(out)
     try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        _remove_stale_temporaries(out)
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
     except OSError as exc:
-        raise BenchSimError(f"{what} = {str(out)!r}: cannot create a folder there ({exc.strerror})") from None
+        raise OutputWriteError(
+            f"{what} = {str(out)!r}: cannot create a folder there ({exc.strerror})"
+        ) from None
+    fd = os.open(tmp, os.O_RDONLY)
+    _lock(fd)
+    global _FILES_WRITTEN
+    _FILES_WRITTEN = 0  # fault points count the files of this set
+    _OPEN_SETS.append(tmp)
     try:
         yield tmp
         write_json(tmp / OUTPUT_MARKER, dict(record or {}))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp creates 0700
-        old: Path | None = None
-        if out.exists():
+        _fault("commit", out)
+        os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp creates 0700
+        if not out.exists():
+            os.replace(tmp, out)
+        elif _exchange(tmp, out):
+            shutil.rmtree(tmp, ignore_errors=True)  # tmp now holds the previous set
+        else:
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
-            os.replace(out, old / "set")
-        os.replace(tmp, out)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
+            old_fd = os.open(old, os.O_RDONLY)
+            _lock(old_fd)
+            try:
+                os.replace(out, old / "set")
+                os.replace(tmp, out)
+                shutil.rmtree(old, ignore_errors=True)
+            finally:
+                os.close(old_fd)
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        failure = write_failure(exc, out, what)
+        if failure is not None:
+            raise failure from None
         raise
+    finally:
+        _OPEN_SETS.remove(tmp)
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def output_files(
+    paths: Sequence[str | os.PathLike[str]], what: Sequence[str] = ("--out", "--tra")
+) -> Iterator[list[Path]]:
+    """Write a few loose output files as one set: yield a temporary path beside each (same
+    suffix), rename them all into place when the block completes. On any exception every
+    temporary is removed and no destination is touched; a write failure becomes an
+    :class:`OutputWriteError` naming the option (``what``, one per path) of the file that failed."""
+    dests = [Path(p) for p in paths]
+    global _FILES_WRITTEN
+    _FILES_WRITTEN = 0
+    with contextlib.ExitStack() as stack:
+        tmps = [stack.enter_context(_deferred_path(d)) for d in dests]
+        _OPEN_SETS.extend(t for t, _ in tmps)
+        try:
+            yield [t for t, _ in tmps]
+        except BaseException as exc:
+            fname = Path(str(getattr(exc, "filename", None) or ""))
+            k = next((i for i, (t, _) in enumerate(tmps) if fname in (t, dests[i])), 0)
+            failure = write_failure(exc, dests[k], what[k] if k < len(what) else "output")
+            if failure is not None:
+                raise failure from None
+            raise
+        finally:
+            for t, _ in tmps:
+                _OPEN_SETS.remove(t)
+        for _, commit in tmps:
+            commit()
+
+
+@contextlib.contextmanager
+def _deferred_path(path: Path) -> Iterator[tuple[Path, Any]]:
+    """A temporary beside ``path`` and a function that renames it into place; removed on exit
+    unless committed. Files are not locked (writers such as HDF5 lock the files they write, and
+    an flock held here would make them fail); a stale one is told by its dead process or age."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(path)
+    prefix = f".{path.name}.partial-{os.getpid()}-"
+    fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+
+    def commit() -> None:
+        os.chmod(tmp_path, 0o666 & ~_umask())
+        os.replace(tmp_path, path)
+
+    try:
+        yield tmp_path, commit
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
 
 
 def format_bytes(n: float) -> str:
@@ -478,3 +833,37 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
         raise ImageReadError(f"{path}: unsupported pixel type {arr.dtype}")
     return arr.astype(np.float64)
+
+
+def image_shape(path: str | os.PathLike[str]) -> tuple[int, ...]:
+    """The array shape of an image file from its header, without decoding the pixels (for the
+    up-front memory estimate). Same formats as :func:`read_image`; raises
+    :class:`ImageReadError` (one line) for a missing, unsupported or unreadable file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ImageReadError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".npy":
+            return tuple(np.load(path, mmap_mode="r", allow_pickle=False).shape)
+        if suffix in (".tif", ".tiff"):
+            import tifffile
+
+            with tifffile.TiffFile(path) as tif:
+                return tuple(tif.series[0].shape)
+        if suffix == ".png":
+            from PIL import Image
+
+            with Image.open(path) as img:
+                bands = len(img.getbands())
+                return (img.height, img.width) if bands == 1 else (img.height, img.width, bands)
+        if suffix == ".exr":
+            import OpenEXR
+
+            with OpenEXR.File(str(path), header_only=True) as f:
+                (x0, y0), (x1, y1) = f.header()["dataWindow"]
+                return (int(y1 - y0 + 1), int(x1 - x0 + 1))
+    except Exception as exc:  # the readers raise many kinds for a broken file
+        detail = " ".join(str(exc).split())[:120]
+        raise ImageReadError(f"{path}: cannot read image header ({detail})") from None
+    raise ImageReadError(f"{path}: unsupported file type '{suffix}' (allowed: .tif, .tiff, .png, .exr, .npy)")

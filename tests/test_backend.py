@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -126,3 +127,92 @@ def test_scalar_fallback_renders_the_same_rig(tmp_path):
         assert res["scalar"][eng][0] == "scalar_rgb"
         assert res["auto"][eng][0] != "scalar_rgb"
         assert res["scalar"][eng][1] == pytest.approx(res["auto"][eng][1], rel=0.01)
+
+
+# ---------------------------------------------------------------- a forced choice is forced
+def test_forced_backends_that_cannot_run_are_one_line_errors(monkeypatch):
+    from bench_sim.errors import BenchSimError
+
+    ok, bad = ProbeResult(True, "fine"), ProbeResult(False, "no NVIDIA device found")
+    probes = {"cuda_probe": lambda: bad, "llvm_probe": lambda p: ok, "candidates": lambda: ["/x"]}
+    msg = r"^render.variant = 'cuda': the CUDA backend cannot run here \(no NVIDIA device found\); use 'auto'"
+    with pytest.raises(BenchSimError, match=msg):
+        choose_backend("cuda", **probes)
+    monkeypatch.setenv("BENCH_SIM_VARIANT", "cuda_ad_mono")
+    with pytest.raises(BenchSimError, match=r"^BENCH_SIM_VARIANT = 'cuda_ad_mono': the CUDA backend"):
+        choose_backend(**probes)
+    monkeypatch.setenv("BENCH_SIM_VARIANT", "llvm")
+    probes = {"cuda_probe": lambda: ok, "llvm_probe": lambda p: bad, "candidates": lambda: ["/l/libLLVM.so"]}
+    with pytest.raises(BenchSimError, match=r"'llvm': no libLLVM passed the probe \(/l/libLLVM.so: rejected"):
+        choose_backend(**probes)
+    # only 'auto' falls back, with a warning
+    monkeypatch.setenv("BENCH_SIM_VARIANT", "auto")
+    with pytest.warns(RuntimeWarning, match="scalar"):
+        choice = choose_backend(cuda_probe=lambda: bad, llvm_probe=lambda p: bad, candidates=list)
+    assert choice.kind == "scalar"
+
+
+@pytest.mark.parametrize(
+    ("name", "mode", "needle"),
+    [
+        ("llvm_garbage", "mono", "not a Mitsuba variant of this installation"),
+        ("vulkan", "mono", "not a Mitsuba variant"),
+        ("llvm_ad_spectral", "mono", "not a variant for mono rendering"),
+        ("llvm_ad_mono", "spectral", "not a variant for spectral rendering"),
+        ("scalar_spectral_polarized", "spectral", "not a variant for spectral"),
+    ],
+)
+def test_unknown_or_mismatched_variant_names(name, mode, needle):
+    from bench_sim.errors import BenchSimError
+
+    with pytest.raises(BenchSimError) as info:
+        backend.check_variant_name(name, mode, "render.variant")
+    msg = str(info.value)
+    assert msg.startswith(f"render.variant = {name!r}: {needle}") and "\n" not in msg
+    assert "'auto', 'cuda', 'llvm', 'scalar'" in msg
+
+
+def test_installed_variants_are_read_without_importing_mitsuba():
+    code = (
+        "import sys\nfrom bench_sim.backend import mitsuba_variants\n"
+        "print(mitsuba_variants(), 'mitsuba' in sys.modules)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    listed, imported = proc.stdout.rsplit(" ", 1)
+    assert "llvm_ad_mono" in listed and "scalar_rgb" in listed and imported.strip() == "False"
+
+
+@pytest.mark.parametrize(
+    "content",
+    ["[1, 2]", '"text"', "{\"llvm|x\": [1]}", "{\"k\": {\"ok\": \"yes\", \"detail\": 3}}", "not json {", ""],
+    ids=["list", "string", "entry list", "entry types", "not json", "empty"],
+)
+def test_a_probe_cache_of_the_wrong_shape_is_ignored_and_rebuilt(content):
+    path = backend._cache_file()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(content)
+    key = backend._cache_key("llvm", "/fake/libLLVM.so.19")
+    if content.startswith("{\"k\""):  # the same shape, under the key that will be looked up
+        path.write_text(content.replace('"k"', json.dumps(key)))
+    calls = []
+
+    def runner(cmd, **kwargs):
+        calls.append(1)
+        return subprocess.CompletedProcess(cmd, 0, "BENCH_SIM_LLVM_OK\n", "")
+
+    assert probe_llvm("/fake/libLLVM.so.19", runner=runner).ok and calls == [1]
+    data = json.loads(path.read_text())
+    assert data[key] == {"ok": True, "detail": "probe kernel ran"}
+    assert probe_llvm("/fake/libLLVM.so.19", runner=runner).detail.endswith("(cached)") and calls == [1]
+
+
+def test_select_backend_chooses_again_when_another_kind_is_forced(monkeypatch):
+    monkeypatch.setattr(backend, "_ACTIVE", None)
+    monkeypatch.setattr(backend, "probe_cuda", lambda **kw: ProbeResult(False, "none"))
+    first = backend.select_backend("auto")
+    assert first.kind in ("llvm", "scalar")
+    assert backend.select_backend("scalar").kind == "scalar"
+    from bench_sim.errors import BenchSimError
+
+    with pytest.raises(BenchSimError, match="'cuda': the CUDA backend cannot run here"):
+        backend.select_backend("cuda")

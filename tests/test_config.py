@@ -48,3 +48,39 @@ def test_base_chain_overrides(tmp_path):
     (tmp_path / "b.toml").write_text("base = 'a.toml'\n[dtdi]\nbeta_bits = 16\n")
     cfg = load_config(tmp_path / "b.toml")
     assert (cfg.sensor.rows, cfg.dtdi.beta_bits, cfg.sensor.columns) == (90, 16, 1024)
+
+
+@pytest.mark.parametrize(
+    ("dtdi", "warns"),
+    [
+        ({"beta_bits": 12}, False),  # the paper: 4031 DN of room, one read adds up to 1003 DN
+        ({"beta_bits": 11}, False),  # 1983 DN of room
+        ({"beta_bits": 10}, True),  # 959 DN of room above the 64 DN pedestal: less than one read
+        ({"beta_bits": 10, "pedestal_dn": 0}, False),  # 1023 DN
+        ({"beta_bits": 10, "pedestal_dn": 0, "subtract_black": False}, False),  # a read adds 1023 DN
+        ({"beta_bits": 10, "pedestal_dn": 1, "subtract_black": False}, True),
+        ({"beta_bits": 8}, True),
+    ],
+)
+def test_a_word_narrower_than_one_pixel_is_warned_about_with_the_numbers(tmp_path, dtdi, warns):
+    import warnings
+
+    from bench_sim.config import config_warnings, with_overrides
+    from bench_sim.errors import ConfigWarning
+
+    path = tmp_path / "b.toml"
+    path.write_text(f"base = '{DEFAULT_CONFIG_PATH}'\n[dtdi]\n" + "".join(
+        f"{k} = {str(v).lower()}\n" for k, v in dtdi.items()
+    ))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cfg = load_config(path)
+        with_overrides(cfg, {"lines": 8})  # configs derived in code are not warned about again
+    lines = config_warnings(cfg)
+    assert len(lines) == int(warns)
+    issued = [str(w.message) for w in caught if w.category is ConfigWarning]
+    assert issued == [f"{path}: {ln}" for ln in lines]
+    if warns:
+        room = 2 ** dtdi["beta_bits"] - 1 - dtdi.get("pedestal_dn", 64)
+        assert f"beta_bits = {dtdi['beta_bits']}: the word holds {room} DN" in lines[0]
+        assert "widen beta_bits to at least" in lines[0] and "\n" not in lines[0]

@@ -59,7 +59,7 @@ def test_presets_keep_strong_and_weak_unchanged() -> None:
         ({"lamp": {"kind": "laser"}}, r"lights: lamp: kind = 'laser'; a light needs kind"),
         ({"Lamp": {"kind": "point"}}, r"lights: light name 'Lamp': use a lower-case identifier"),
         ({"drum": {"kind": "point"}}, r"lights: light name 'drum'"),
-        ({"lamp": {"kind": "area", "size_m": [0.1, 0.0]}}, r"lights\.lamp\.size_m\.1 = 0\.0: .*than 0"),
+        ({"lamp": {"kind": "area", "size_m": [0.1, 0.0]}}, r"lights\.lamp\.size_m\[1\] = 0\.0: .*than 0"),
         ({"lamp": {"kind": "point", "cutoff_deg": 3}}, r"unknown key 'lights\.lamp\.cutoff_deg'"),
         ({"lamp": {"kind": "directional", "direction": [0, 0, 0]}}, r"lights\.lamp: direction = \[0, 0, 0\]"),
         ({"lamp": {"kind": "fill"}}, r"lights: fill lights \['weak', 'lamp'\] all emit"),

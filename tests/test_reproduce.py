@@ -101,6 +101,16 @@ def test_bad_out_is_one_line_and_writes_nothing(tmp_path):
     assert target.read_text() == "x"
 
 
+def test_same_seed_gives_byte_identical_data_files(quick_runs):
+    """Images, figures, tables and the completion record are byte-identical; wall-clock times
+    live only in metrics.json's ``wall_s``/``timings_s`` and the report's timing table."""
+    a, b = quick_runs
+    names = sorted(p.name for p in a.iterdir() if p.name not in ("metrics.json", "report.md"))
+    assert set(names) >= {"gamma1.tiff", "gamma2.tiff", "gamma_hdr.exr", "fig3_stages.png", "table1.csv"}
+    assert ".bench-sim-output.json" in names
+    assert [n for n in names if (a / n).read_bytes() != (b / n).read_bytes()] == []
+
+
 @pytest.mark.parametrize(
     ("overrides", "clips_on_word"),
     [

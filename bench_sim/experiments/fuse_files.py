@@ -6,8 +6,9 @@ NPY (read by :func:`bench_sim.io.read_image`). They must hold **integer** DN val
 output word (paper eq. 1-4); a fractional value means the file is not a stage image in DN (for
 example a 0..1 normalised EXR) and eq. 11's threshold would be meaningless, so it is refused.
 
-Outputs, written only after every check has passed (atomic writes; if the second file cannot be
-written the first is removed again):
+Outputs, written only after every check has passed (the output folders writable, the images'
+sizes read from their headers fitting in memory and on the disk), as one set: both files are
+written under temporary names and renamed into place together, so a failure leaves neither:
 
 * ``out`` (``.exr``): channel ``Y`` = ``Gamma_HDR`` [DN, stage-``mu2`` units, float32; exact for
   values below ``2**24``], channel ``source`` = the stage (``mu1`` or ``mu2``) each pixel came
@@ -23,9 +24,9 @@ option, the value and what is allowed.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import logging
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -37,7 +38,8 @@ from bench_sim.config import TRA_METHODS
 from bench_sim.errors import BenchSimError
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
 from bench_sim.fusion.tonemap import gamma_tra
-from bench_sim.io import read_image, write_exr, write_png
+from bench_sim.io import check_output_file, image_shape, output_files, read_image, write_exr, write_png
+from bench_sim.resources import check_resources, estimate_fuse
 from bench_sim.sensor.model import check_beta_bits
 
 __all__ = ["fuse_files", "check_stage_image"]
@@ -86,19 +88,6 @@ def _check_int(name: str, value: Any) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         raise BenchSimError(f"{name} = {value!r}: must be an integer")
     return int(value)
-
-
-def _check_out(path: Path, option: str, suffix: str) -> None:
-    if path.suffix.lower() != suffix:
-        got = path.suffix or "no suffix"
-        raise BenchSimError(f"{option} = {path}: must be a {suffix} file (got '{got}')")
-    if path.is_dir():
-        raise BenchSimError(f"{option} = {path}: is a directory; give a {suffix} file name")
-    parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        raise BenchSimError(f"{option} = {path}: {parent} is not a directory")
 
 
 def _read_quietly(path: Path) -> np.ndarray:
@@ -181,16 +170,19 @@ def fuse_files(
         raise BenchSimError(
             f"--pedestal = {pedestal_dn!r}: must lie in 0..{2**beta - 1} DN (below the word clip)"
         )
-    _check_out(out_p, "--out", ".exr")
+    check_output_file(out_p, "--out", ".exr")
     inputs = {low_p.resolve(), high_p.resolve()}
     if out_p.resolve() in inputs:
         raise BenchSimError(f"--out = {out_p}: is one of the input files; choose another name")
     if tra_p is not None:
-        _check_out(tra_p, "--tra", ".png")
+        check_output_file(tra_p, "--tra", ".png")
         if tra_p.resolve() in inputs:
             raise BenchSimError(f"--tra = {tra_p}: is one of the input files; choose another name")
         if tra_p.resolve() == out_p.resolve():
             raise BenchSimError(f"--tra = {tra_p}: same file as --out")
+    # sizes from the headers, before decoding anything
+    shapes = {p: image_shape(p) for p in (low_p, high_p)}
+    check_resources(estimate_fuse(max(shapes.values(), key=math.prod), tra_p is not None), out_p.parent)
 
     g1 = _read_quietly(low_p)
     g2 = _read_quietly(high_p)
@@ -227,25 +219,22 @@ def fuse_files(
         "pixels_from_low": int(np.count_nonzero(result.source == mu1)),
         "pixels_saturated": int(np.count_nonzero(result.saturated)),
     }
-    write_exr(out_p, {"Y": result.hdr, "source": result.source.astype(np.float32)}, meta)
-    if tra_p is not None and display is not None:
-        tra_meta = {
-            "kind": "Gamma_TRA",
-            "tra": tra_method,
-            "formula": TRA_METHODS[tra_method],
-            "x": "Gamma_HDR [DN]",
-            "X_full_scale_dn": result.full_scale_dn,
-            "bits": 8,
-            "hdr": str(out_p),
-            "mu1": mu1,
-            "mu2": mu2,
-            "beta": beta,
-            "version": __version__,
-        }
-        try:
-            write_png(tra_p, display, tra_meta)
-        except BaseException:
-            with contextlib.suppress(FileNotFoundError):
-                out_p.unlink()
-            raise
+    dests = [out_p] if tra_p is None else [out_p, tra_p]
+    with output_files(dests) as tmps:  # both files or neither
+        write_exr(tmps[0], {"Y": result.hdr, "source": result.source.astype(np.float32)}, meta)
+        if tra_p is not None and display is not None:
+            tra_meta = {
+                "kind": "Gamma_TRA",
+                "tra": tra_method,
+                "formula": TRA_METHODS[tra_method],
+                "x": "Gamma_HDR [DN]",
+                "X_full_scale_dn": result.full_scale_dn,
+                "bits": 8,
+                "hdr": str(out_p),
+                "mu1": mu1,
+                "mu2": mu2,
+                "beta": beta,
+                "version": __version__,
+            }
+            write_png(tmps[1], display, tra_meta)
     return {**meta, "out": str(out_p), "tra": str(tra_p) if tra_p else None}

@@ -7,7 +7,12 @@ from typing import Any
 from bench_sim import __version__
 from bench_sim.config import BenchConfig, config_sha256, config_to_toml_dict
 
-__all__ = ["provenance"]
+__all__ = ["provenance", "render_provenance", "PROCESS_KEYS"]
+
+#: Keys of a render set-up's ``info`` that describe the process rather than the run: how many
+#: Mitsuba renders it made depends on the record cache the process already holds. They stay out
+#: of data files, so the same config and seed give the same bytes in any process.
+PROCESS_KEYS = ("mitsuba_renders", "mitsuba_renders_process")
 
 
 def provenance(cfg: BenchConfig, seed: int, **extra: Any) -> dict[str, Any]:
@@ -24,3 +29,8 @@ def provenance(cfg: BenchConfig, seed: int, **extra: Any) -> dict[str, Any]:
     }
     meta.update(extra)
     return meta
+
+
+def render_provenance(info: dict[str, Any]) -> dict[str, Any]:
+    """A render set-up's ``info`` for an output's metadata: without :data:`PROCESS_KEYS`."""
+    return {k: v for k, v in info.items() if k not in PROCESS_KEYS}

@@ -67,7 +67,6 @@ from bench_sim.experiments.uniform_field import (
     measurement_pedestal_dn,
 )
 from bench_sim.io import (
-    check_output_dir,
     output_set,
     write_csv,
     write_emva_descriptor,
@@ -583,15 +582,20 @@ def run_ptc(
     ------
     BenchSimError
         A bad argument (stage outside ``1 .. rows``, ``beta_bits > 16``, negative seed, bad image
-        size, ``out`` a file or a foreign non-empty folder), before anything is computed.
+        size, ``out`` a file, a foreign non-empty folder or not writable, a run that does not fit
+        in memory or on the disk), before anything is computed.
     """
-    if not isinstance(seed, int | np.integer) or isinstance(seed, bool) or seed < 0:
-        raise BenchSimError(f"--seed = {seed!r}: must be an integer >= 0")
+    from bench_sim.experiments.preflight import check_seed, preflight
+    from bench_sim.resources import estimate_ptc
+
+    seed = check_seed(seed)
     plan = plan_ptc(
         cfg, stages, lines=lines, columns=columns, log_levels=log_levels, dense_levels=dense_levels,
         spatial_images=spatial_images,
     )
-    out = check_output_dir(out)
+
+    estimate = estimate_ptc(plan.stages, plan.levels.size, plan.lines, plan.columns, plan.spatial_images)
+    out = preflight(None, out=out, estimate=estimate, render=False)
     images = measure_ptc(cfg, plan, int(seed))
     results = analyse_ptc(cfg, plan, images)
     return write_ptc(out, cfg, int(seed), plan, images, results)

@@ -5,6 +5,9 @@
 (JSON) carries the shape ``[frames, rows, columns]``, units and provenance; :func:`read_exposures`
 returns the ``(frames, rows, columns)`` array. ``ground_truth.exr`` holds the target reflectance
 behind each complete output line (channel ``reflectance``, shape ``(frames - rows + 1, columns)``).
+``meta.json`` is the same metadata plus the run's own figures: ``wall_s`` (its wall time) and
+``mitsuba_renders`` (renders made; fewer when the process had the records cached).
+The three files are written as one output set (:func:`bench_sim.io.output_set`).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.provenance import provenance
+from bench_sim.experiments.provenance import provenance, render_provenance
 from bench_sim.io import read_exr, write_exr, write_json
 
 __all__ = ["run_render", "read_exposures"]
@@ -33,15 +36,23 @@ def run_render(
     cfg: BenchConfig, *, frames: int, engine: str | None, seed: int, out: Path
 ) -> dict[str, Any]:
     """Render ``frames`` line periods and write ``exposures.exr``, ``ground_truth.exr`` and
-    ``meta.json`` into ``out``. Returns the metadata."""
+    ``meta.json`` into ``out`` as one output set. Returns the metadata.
+
+    Everything is checked first (frames, engine, seed, output folder, memory and disk, target
+    image, backend); ``meta.json``'s ``wall_s`` is the only wall-clock time (the EXR files of two
+    runs with the same config and seed are identical)."""
+    from bench_sim.experiments.preflight import check_seed, preflight
+    from bench_sim.io import output_set
     from bench_sim.render.exposures import render_photons
     from bench_sim.render.texture import ground_truth_reflectance
+    from bench_sim.resources import estimate_render
 
-    if frames < 1:
-        raise BenchSimError(f"--frames = {frames}: must be at least 1")
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise BenchSimError(f"--out = {str(out)!r}: exists and is not a folder")
+    if isinstance(frames, bool) or not isinstance(frames, int | np.integer) or frames < 1:
+        raise BenchSimError(f"--frames = {frames!r}: must be an integer >= 1")
+    if engine is not None and engine not in ("fast", "reference"):
+        raise BenchSimError(f"--engine = {engine!r}: allowed 'fast' or 'reference'")
+    seed = check_seed(seed)
+    out = preflight(cfg, out=out, estimate=estimate_render(cfg, int(frames), engine))
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     photons, setup = render_photons(cfg, frames, rng, engine=engine)
@@ -55,15 +66,19 @@ def run_render(
         shape=[K, M, N],
         layout="frame k = image rows k*M .. k*M+M-1",
         units=UNITS,
-        render=setup.info,
+        render=render_provenance(setup.info),
         backend=setup.backend.as_dict(),
-        wall_s=round(time.perf_counter() - t0, 3),
     )
-    write_exr(out / "exposures.exr", {"photons": photons.reshape(K * M, N)}, meta)
-    if truth is not None:
-        tmeta = dict(meta, kind="ground_truth", shape=[lines, N], layout="scene line j = row j")
-        write_exr(out / "ground_truth.exr", {"reflectance": truth}, tmeta)
-    write_json(out / "meta.json", meta)
+    record = {"command": "render", **{k: meta[k] for k in ("version", "seed", "config_sha256")}}
+    with output_set(out, record) as tmp:
+        write_exr(tmp / "exposures.exr", {"photons": photons.reshape(K * M, N)}, meta)
+        if truth is not None:
+            tmeta = dict(meta, kind="ground_truth", shape=[lines, N], layout="scene line j = row j")
+            write_exr(tmp / "ground_truth.exr", {"reflectance": truth}, tmeta)
+        # the run's own figures, in meta.json only: its wall time and the Mitsuba renders it made
+        meta["wall_s"] = round(time.perf_counter() - t0, 3)
+        meta["mitsuba_renders"] = setup.info.get("mitsuba_renders")
+        write_json(tmp / "meta.json", meta)
     return meta
 
 

@@ -24,9 +24,9 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, with_overrides
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.provenance import provenance
+from bench_sim.experiments.provenance import provenance, render_provenance
 
-__all__ = ["run_reproduce", "quick_config", "PAPER", "FIG3_STAGES", "QUICK_OVERRIDES"]
+__all__ = ["run_reproduce", "check_reproducible", "quick_config", "PAPER", "FIG3_STAGES", "QUICK_OVERRIDES"]
 
 FIG3_STAGES: tuple[int, ...] = tuple(range(5, 101, 5))
 
@@ -37,6 +37,11 @@ PAPER = {
     "mu1": 10,
     "mu2": 80,
 }
+
+#: Width of the whole-chain DR measurement's images [columns] (narrower sensors: their width).
+CHAIN_DR_COLUMNS = 64
+#: Bits of the stage images' TIFF files.
+TIFF_BITS = 16
 
 #: ``--quick``: the same experiment on a 512-column sensor and 256 lines (CI, first runs).
 QUICK_OVERRIDES: dict[str, Any] = {
@@ -71,27 +76,115 @@ def _box(panel: Any, cfg: BenchConfig, name: str, half: str, lines: int) -> tupl
     )
 
 
+def _inset_boxes(panel: Any, cfg: BenchConfig, lines: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Fig. 4's insets: the lower (darkest) half of the wedge under the fill alone, and the bar
+    group under the spot."""
+    wl0, wl1, wc0, wc1 = _box(panel, cfg, "wedge", "right", lines)
+    inset = max((wc1 - wc0) // 10, 1)
+    dark_box = ((wl0 + wl1) // 2, wl1, wc0 + inset, wc1 - inset)
+    return dark_box, _box(panel, cfg, "vbars", "left", lines)
+
+
+def check_reproducible(cfg: BenchConfig) -> None:
+    """Refuse, before anything is rendered, a config whose images cannot show what the
+    reproduction measures: the paper target (``target.layout = "paper"``) with a wedge step of
+    each half and both Fig. 4 insets (the dark wedge, the bar group) in the ``lines`` x
+    ``sensor.columns`` image, stage words that fit its 16-bit TIFF files, and a word wide
+    enough for the whole-chain DR measurement's pedestal. Raises :class:`BenchSimError` (one
+    line) naming what to change."""
+    from bench_sim.experiments.pass_metrics import patch_slices
+    from bench_sim.rig.geometry import rig_geometry
+    from bench_sim.rig.target import make_panel
+
+    t = cfg.target
+    if t.layout != "paper":
+        raise BenchSimError(
+            f"target.layout = {t.layout!r}: reproduce measures the paper target's wedge and bars; "
+            "use target.layout = 'paper' (bench-sim simulate takes any target)"
+        )
+    if cfg.dtdi.beta_bits > TIFF_BITS:
+        raise BenchSimError(
+            f"dtdi.beta_bits = {cfg.dtdi.beta_bits}: reproduce writes gamma1/gamma2 as {TIFF_BITS}-bit "
+            f"TIFF; use beta_bits <= {TIFF_BITS} (bench-sim simulate writes any word)"
+        )
+    from bench_sim.experiments.uniform_field import measurement_pedestal_dn
+
+    ped = measurement_pedestal_dn(cfg, (cfg.fusion.mu1, cfg.fusion.mu2))  # the DR measurement's word
+    _check_dr_measurable(cfg, ped)
+    geom = rig_geometry(cfg)
+    panel = make_panel(t, 2 * math.pi * geom.radius_m / geom.object_pixel_m)
+    lines, cols = cfg.lines, cfg.sensor.columns
+    patches = patch_slices(panel, geom, cfg, lines)
+    dark, bright = _inset_boxes(panel, cfg, lines)
+    halves = all(any(k.startswith(f"wedge_{h}") for k in patches) for h in ("left", "right"))
+    if halves and all(b[1] - b[0] >= 2 and b[3] - b[2] >= 2 for b in (dark, bright)):
+        return
+    full = max(int(math.ceil(panel.element_box("vbars", "left")[1] * geom.object_pixel_m / geom.delta_m)), 1)
+    raise BenchSimError(
+        f"lines = {lines}, sensor.columns = {cols}: the image does not show the paper target's wedge "
+        f"steps and bar group (target.panel_lines = {t.panel_lines}, panel_columns = "
+        f"{t.panel_columns}); raise lines to at least {full} or lower target.panel_lines, and keep "
+        "sensor.columns at least target.panel_columns"
+    )
+
+
+def _check_dr_measurable(cfg: BenchConfig, pedestal_dn: float) -> None:
+    """The whole-chain DR needs, for stages ``mu1`` and ``mu2``, an SNR = 1 point below
+    saturation (model of :mod:`bench_sim.sensor.model`): temporal dark noise the ADC can see
+    (above its rounding step when it rounds) and a saturation above that point."""
+    from bench_sim.sensor.model import (
+        QUANTIZATION_VAR_DN2,
+        dark_noise_e,
+        stage_saturation_photons,
+        stage_snr1_photons,
+    )
+
+    s, t = cfg.sensor, cfg.timing.t_int_s
+    noise_dn = s.conversion_gain_dn_per_e * dark_noise_e(s, t)
+    if noise_dn**2 < (QUANTIZATION_VAR_DN2 if s.quantization else 1e-12):
+        raise BenchSimError(
+            f"sensor: the dark signal has {noise_dn:.3g} DN rms of temporal noise per read (read noise "
+            f"{s.read_noise_e if s.read_noise else 0} e-, dark current {s.dark_current_e_s} e-/s, "
+            f"K = {s.conversion_gain_dn_per_e} DN/e-), below the ADC's rounding: reproduce's dynamic "
+            "range has no SNR = 1 point to measure; raise the read noise or K"
+        )
+    for m in (cfg.fusion.mu1, cfg.fusion.mu2):
+        sat = stage_saturation_photons(
+            s, t, m, beta_bits=cfg.dtdi.beta_bits, subtract_black=cfg.dtdi.subtract_black,
+            pedestal_dn=pedestal_dn,
+        )
+        snr1 = stage_snr1_photons(s, t, m)
+        if snr1 >= sat:
+            raise BenchSimError(
+                f"stage {m} saturates at {sat:.3g} photons per pixel per frame, before its SNR reaches 1 "
+                f"({snr1:.3g}): reproduce's dynamic range has nothing to measure; widen the word or "
+                "the full well, or lower the noise"
+            )
+
+
 def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False) -> dict[str, Any]:
     """Run the reproduction and write its outputs into ``out``. Returns ``metrics.json``'s dict."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from bench_sim.experiments.chain_dr import measure_chain_dynamic_range
     from bench_sim.experiments.pass_metrics import pass_metrics
+    from bench_sim.experiments.preflight import check_seed, preflight
     from bench_sim.experiments.simulate import run_pass
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
     from bench_sim.fusion.tonemap import quantize_display, tone_map
     from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
+    from bench_sim.resources import estimate_reproduce
     from bench_sim.sensor.model import stage_offset_dn
 
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise BenchSimError(f"--out = {str(out)!r}: exists and is not a folder")
+    seed = check_seed(seed)
     if quick:
         cfg = quick_config(cfg)
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
     rows = cfg.sensor.rows
     fig3 = tuple(m for m in FIG3_STAGES if m <= rows) or (mu1, mu2)
     stages = sorted(set(fig3) | {mu1, mu2})
+    check_reproducible(cfg)
+    out = preflight(cfg, out=out, estimate=estimate_reproduce(cfg, stages))
     lines = cfg.lines
     frames = lines + max(stages) - 1
     t_start = time.perf_counter()
@@ -132,7 +225,8 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
 
     # 4. metrics
     t0 = time.perf_counter()
-    chain_dr = measure_chain_dynamic_range(cfg, rng, **({"n_levels": 24} if quick else {}))
+    dr_size = {"columns": min(CHAIN_DR_COLUMNS, cfg.sensor.columns)}
+    chain_dr = measure_chain_dynamic_range(cfg, rng, **dr_size, **({"n_levels": 24} if quick else {}))
     dr = chain_dr.as_dict()
     panel = setup.grid.panel
     pm = pass_metrics(cfg, sim, fused)
@@ -145,7 +239,8 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
 
     # 5. outputs
     t0 = time.perf_counter()
-    meta = provenance(cfg, seed, quick=quick, render=setup.info, backend=setup.backend.as_dict())
+    meta = provenance(cfg, seed, quick=quick, render=render_provenance(setup.info),
+                      backend=setup.backend.as_dict())
     metrics: dict[str, Any] = {
         "mu1": mu1,
         "mu2": mu2,
@@ -193,16 +288,19 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         "engine": setup.info["engine"],
         "variant": setup.info["variant"],
     }
-    _write_outputs(out, cfg, metrics, meta, stage_images, fig3, fused, tra8, panel, lines)
-    _snr_figure(out / "snr_vs_signal.png", chain_dr, meta)
-    timer.add("write", time.perf_counter() - t0)
-    metrics["timings_s"] = {k: round(v, 3) for k, v in timer.steps.items()}
-    metrics["wall_s"] = round(time.perf_counter() - t_start, 3)
     from bench_sim.experiments.report import write_report
-    from bench_sim.io import write_json
+    from bench_sim.io import output_set, write_json
 
-    write_json(out / "metrics.json", metrics)
-    write_report(out / "report.md", metrics, cfg, quick)
+    record = {"command": "reproduce", "quick": quick, "version": meta["version"], "seed": int(seed),
+              "config_sha256": meta["config_sha256"]}
+    with output_set(out, record) as tmp:  # the files as one set: all of them or none
+        _write_outputs(tmp, cfg, metrics, meta, stage_images, fig3, fused, tra8, panel, lines)
+        _snr_figure(tmp / "snr_vs_signal.png", chain_dr, meta)
+        timer.add("write", time.perf_counter() - t0)
+        metrics["timings_s"] = {k: round(v, 3) for k, v in timer.steps.items()}
+        metrics["wall_s"] = round(time.perf_counter() - t_start, 3)
+        write_json(tmp / "metrics.json", metrics)
+        write_report(tmp / "report.md", metrics, cfg, quick)
     for step, s in metrics["timings_s"].items():
         print(f"  {step:<12} {s:8.2f} s")
     print(f"  {'total':<12} {metrics['wall_s']:8.2f} s  -> {out}")
@@ -262,11 +360,7 @@ def _write_outputs(
         lambda: write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})")),
     ])
     fig3_stages(stage_images, fig3, beta, out / "fig3_stages.png", meta)
-    # dark detail: the lower (darkest) half of the wedge under the fill alone
-    wl0, wl1, wc0, wc1 = _box(panel, cfg, "wedge", "right", lines)
-    inset = max((wc1 - wc0) // 10, 1)
-    dark_box = ((wl0 + wl1) // 2, wl1, wc0 + inset, wc1 - inset)
-    bright_box = _box(panel, cfg, "vbars", "left", lines)
+    dark_box, bright_box = _inset_boxes(panel, cfg, lines)
     dark, bright = metrics["darkest_patch"], metrics["brightest_patch"]
     fig4_hdr(
         np.clip(fused.hdr.astype(np.float32) / np.float32(fused.full_scale_dn), 0, 1),

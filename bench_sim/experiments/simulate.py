@@ -69,7 +69,7 @@ VARIABLES: dict[str, tuple[str, str]] = {
 def resolve_config(config: BenchConfig | str | Path | Mapping[str, Any] | None) -> BenchConfig:
     """A :class:`BenchConfig` from a config, a TOML path, or a dict of overrides on the default
     rig (``None``: the default rig)."""
-    from bench_sim.config import load_config, with_overrides
+    from bench_sim.config import load_config, warn_config, with_overrides
 
     if config is None:
         return load_config()
@@ -78,7 +78,9 @@ def resolve_config(config: BenchConfig | str | Path | Mapping[str, Any] | None) 
     if isinstance(config, str | Path):
         return load_config(config)
     if isinstance(config, Mapping):
-        return with_overrides(load_config(), dict(config), source="simulate(config=...)")
+        cfg = with_overrides(load_config(), dict(config), source="simulate(config=...)")
+        warn_config(cfg, "simulate(config=...)")
+        return cfg
     raise BenchSimError(
         f"config = {type(config).__name__}: expected a BenchConfig, a TOML path or a dict of overrides"
     )
@@ -387,9 +389,10 @@ def simulate(
     """
     cfg = resolve_config(config)
     st = check_stages(stages, cfg.sensor.rows)
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise BenchSimError(f"seed = {seed!r}: must be an integer >= 0")
-    check_inputs(cfg)
+    from bench_sim.experiments.preflight import check_seed
+
+    seed = check_seed(seed, "seed")
+    check_inputs(cfg, st)
     if not progress:
         return run_pass(cfg, st, int(seed)).dataset
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -407,12 +410,20 @@ def simulate(
         return run_pass(cfg, st, int(seed), on_frames=lambda n: bar.update(task, advance=n)).dataset
 
 
-def check_inputs(cfg: BenchConfig) -> None:
-    """Check everything a pass reads besides the config itself (target image files) before any
-    rendering; raises :class:`BenchSimError` naming the file and the problem."""
-    from bench_sim.rig.target_sources import check_target_image
+def check_inputs(
+    cfg: BenchConfig, stages: Iterable[int] | None = None, out: Path | None = None, fmt: str = "zarr"
+) -> None:
+    """Check everything a pass needs besides the config itself before any rendering: the target
+    image file and, given the ``stages``, the output folder (if any), the memory and disk of the
+    run and the backend (:func:`bench_sim.experiments.preflight.preflight`); raises
+    :class:`BenchSimError` (one line)."""
+    from bench_sim.experiments.preflight import preflight
+    from bench_sim.resources import estimate_simulate
 
-    check_target_image(cfg.target)
+    if stages is None:  # the inputs alone
+        preflight(cfg, out=None, estimate=None, render=False)
+        return
+    preflight(cfg, out=out, estimate=estimate_simulate(cfg, stages, fmt))
 
 
 # --- the command: bench-sim simulate ------------------------------------------------------------
@@ -491,17 +502,16 @@ def run_simulate(
     any rendering; nothing is written unless the whole set is complete.
     """
     from bench_sim.config import load_config
+    from bench_sim.experiments.preflight import check_seed
     from bench_sim.experiments.provenance import provenance
-    from bench_sim.io import check_output_dir, output_set
+    from bench_sim.io import output_set
 
     if fmt not in FORMATS:
         raise BenchSimError(f"--format = {fmt!r}: allowed {', '.join(FORMATS)}")
-    if seed < 0:
-        raise BenchSimError(f"--seed = {seed}: must be an integer >= 0")
+    check_seed(seed)
     cfg = load_config(config)
     st = parse_stages_arg(stages, cfg.sensor.rows)
-    check_inputs(cfg)
-    check_output_dir(out)
+    check_inputs(cfg, st, out, fmt)
     ds = simulate(cfg, stages=st, seed=seed, progress=progress)
     meta = provenance(
         cfg, seed, kind="simulation", stages=list(st), engine=ds.attrs["engine"], variant=ds.attrs["variant"]

@@ -1,0 +1,82 @@
+"""The up-front checks every command makes before it computes anything.
+
+In this order (cheap first): the output folder can receive an output set
+(:func:`bench_sim.io.check_output_dir`), the run fits in the memory and on the disk available
+(:func:`bench_sim.resources.check_resources` with the command's estimate), the target image
+file reads (``target.layout = "image"``), and the rendering backend chosen or forced can run
+(:func:`bench_sim.backend.select_backend`). Each failure is one
+:class:`~bench_sim.errors.BenchSimError` line; nothing has been written then.
+
+A new command calls :func:`preflight` with its config, its output folder and its
+:class:`~bench_sim.resources.ResourceEstimate`, then computes, then writes inside
+:func:`bench_sim.io.output_set`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from bench_sim.config import BenchConfig
+from bench_sim.resources import ResourceEstimate, check_resources
+
+__all__ = ["preflight", "check_seed", "SEED_MAX"]
+
+#: The largest root seed: seeds are stored as signed 64-bit integers (Zarr, NetCDF attributes).
+SEED_MAX = 2**63 - 1
+
+
+def check_seed(seed: object, what: str = "--seed") -> int:
+    """A root seed: an integer in ``0 .. 2**63 - 1`` (:data:`SEED_MAX`). Raises
+    :class:`~bench_sim.errors.BenchSimError` naming ``what`` otherwise."""
+    import numpy as np
+
+    from bench_sim.errors import BenchSimError
+
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= int(seed) <= SEED_MAX:
+        raise BenchSimError(f"{what} = {seed!r}: must be an integer in 0..2**63-1")
+    return int(seed)
+
+
+def preflight(
+    cfg: BenchConfig | None,
+    *,
+    out: str | os.PathLike[str] | None,
+    estimate: ResourceEstimate | None,
+    render: bool = True,
+    what: str = "--out",
+) -> Path | None:
+    """Check a run before computing: output folder, memory and disk, target image, backend.
+
+    Parameters
+    ----------
+    cfg
+        The run's config (``None``: no config, e.g. ``fuse``).
+    out
+        Output folder of the run's output set (``None``: none, or checked by the caller).
+    estimate
+        What the run needs (``None``: no resource check).
+    render
+        Whether the run renders (the backend is chosen, or a forced one checked, up front).
+    what
+        Name of the output option, for messages.
+
+    Returns
+    -------
+    Path or None
+        ``out`` resolved.
+    """
+    from bench_sim.io import check_output_dir
+
+    out_path = check_output_dir(out, what) if out is not None else None
+    if estimate is not None:
+        check_resources(estimate, out_path)
+    if cfg is not None:
+        from bench_sim.rig.target_sources import check_target_image
+
+        check_target_image(cfg.target)
+        if render:
+            from bench_sim.backend import select_backend
+
+            select_backend(cfg.render.variant, "spectral" if cfg.render.spectral else "mono")
+    return out_path

@@ -1,0 +1,187 @@
+"""Outputs are written as a set: all files or none, a rerun replaces the whole set, temporaries
+of killed runs are removed, write failures are one line (``bench_sim.io``)."""
+
+from __future__ import annotations
+
+import errno
+import os
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from bench_sim import io as bio
+from bench_sim.errors import BenchSimError
+from bench_sim.io import OUTPUT_MARKER, OutputWriteError, output_files, output_set, read_output_record
+
+
+def _tree(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _write_set(out: Path, files: dict[str, str], record: dict | None = None) -> None:
+    with output_set(out, record or {"command": "test"}) as tmp:
+        for name, text in files.items():
+            (tmp / name).parent.mkdir(parents=True, exist_ok=True)
+            bio.write_text(tmp / name, text)
+
+
+def _temporaries(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir() if ".partial-" in p.name or ".old-" in p.name)
+
+
+@pytest.mark.parametrize("exchange", [True, False], ids=["renameat2 exchange", "two renames"])
+def test_a_rerun_replaces_the_whole_set(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, exchange: bool
+) -> None:
+    if not exchange:
+        monkeypatch.setattr(bio, "_exchange", lambda a, b: False)
+    out = tmp_path / "out"
+    _write_set(out, {"ground_truth.exr": "1", "stage_001/a.tif": "1", "meta.json": "1"}, {"seed": 1})
+    _write_set(out, {"meta.json": "2", "stage_002/a.tif": "2"}, {"seed": 2})
+    assert set(_tree(out)) == {"meta.json", "stage_002/a.tif", OUTPUT_MARKER}  # nothing of run 1 left
+    assert read_output_record(out) == {"seed": 2}
+    assert _temporaries(tmp_path) == []
+    assert oct(out.stat().st_mode & 0o777) == oct(0o777 & ~_umask())
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@pytest.mark.parametrize(
+    ("error", "seen"),
+    [
+        (KeyboardInterrupt(), KeyboardInterrupt),
+        (ValueError("a bug"), ValueError),
+        (OSError(errno.ENOSPC, "No space left on device"), OutputWriteError),
+    ],
+)
+def test_a_failed_run_keeps_the_previous_set(tmp_path: Path, error: BaseException, seen: type) -> None:
+    out = tmp_path / "out"
+    _write_set(out, {"a.txt": "old", "b.txt": "old"})
+    before = _tree(out)
+    with pytest.raises(seen), output_set(out) as tmp:
+        bio.write_text(tmp / "a.txt", "new")
+        raise error
+    assert _tree(out) == before and _temporaries(tmp_path) == []
+
+
+def test_a_failed_first_run_leaves_nothing(tmp_path: Path) -> None:
+    with pytest.raises(RuntimeError), output_set(tmp_path / "out") as tmp:
+        bio.write_text(tmp / "a.txt", "x")
+        raise RuntimeError("boom")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_only_empty_or_bench_sim_folders_are_replaced(tmp_path: Path) -> None:
+    (tmp_path / "empty").mkdir()
+    _write_set(tmp_path / "empty", {"a.txt": "x"})
+    (tmp_path / "thesis").mkdir()
+    (tmp_path / "thesis" / "chapter1.tex").write_text("precious")
+    with pytest.raises(BenchSimError, match="not written by bench_sim"):
+        _write_set(tmp_path / "thesis", {"a.txt": "x"})
+    assert (tmp_path / "thesis" / "chapter1.tex").read_text() == "precious"
+
+
+def _dead_pid() -> int:
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - child
+        os._exit(0)
+    os.waitpid(pid, 0)
+    return pid
+
+
+def test_temporaries_of_dead_runs_are_removed_and_live_ones_kept(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    dead = Path(tempfile.mkdtemp(prefix=f".out.partial-{_dead_pid()}-", dir=tmp_path))
+    (dead / "exposures.exr").write_bytes(b"x" * 1000)
+    dead_file = Path(tempfile.mkstemp(prefix=f".out.partial-{_dead_pid()}-", dir=tmp_path)[1])
+    live = Path(tempfile.mkdtemp(prefix=f".out.partial-{os.getpid()}-", dir=tmp_path))
+    fd = os.open(live, os.O_RDONLY)
+    bio._lock(fd)  # a run that is still writing holds the lock
+    try:
+        _write_set(out, {"a.txt": "x"})
+        assert not dead.exists() and not dead_file.exists() and live.is_dir()
+    finally:
+        os.close(fd)
+    os.utime(live, (0, 0))  # unlocked, and its process (this one) has had it for ages: stale
+    _write_set(out, {"a.txt": "y"})
+    assert not live.exists() and _temporaries(tmp_path) == []
+
+
+def test_a_set_moved_aside_by_a_killed_run_is_put_back(tmp_path: Path) -> None:
+    """Killed between its two renames (file systems without an atomic exchange): the previous
+    set waits in ``.out.old-PID-*/set`` and ``out`` is missing; the next run restores it first."""
+    out = tmp_path / "out"
+    _write_set(out, {"a.txt": "old"})
+    old = Path(tempfile.mkdtemp(prefix=f".out.old-{_dead_pid()}-", dir=tmp_path))
+    os.replace(out, old / "set")
+    bio._remove_stale_temporaries(out)
+    assert (out / "a.txt").read_text() == "old" and _temporaries(tmp_path) == []
+
+
+def test_output_files_are_written_together_or_not_at_all(tmp_path: Path) -> None:
+    a, b = tmp_path / "hdr.exr", tmp_path / "sub" / "tra.png"
+    with pytest.raises(OutputWriteError, match="No space left on device"), output_files([a, b]) as (ta, tb):
+        ta.write_bytes(b"hdr")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert not a.exists() and not b.exists()
+    assert [p.name for p in tmp_path.rglob("*") if p.is_file()] == []
+    with output_files([a, b]) as (ta, tb):
+        ta.write_bytes(b"hdr")
+        tb.write_bytes(b"png")
+    assert a.read_bytes() == b"hdr" and b.read_bytes() == b"png"
+
+
+@pytest.mark.parametrize(
+    ("exc", "needle"),
+    [
+        (OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "x.exr"), "No space left on device (ENOSPC)"),
+        (OSError(errno.EDQUOT, os.strerror(errno.EDQUOT)), "(EDQUOT)"),
+        (OSError(errno.EFBIG, os.strerror(errno.EFBIG)), "File too large (EFBIG)"),
+        (OSError(errno.EROFS, os.strerror(errno.EROFS)), "Read-only file system (EROFS)"),
+        (OSError(errno.EACCES, os.strerror(errno.EACCES)), "Permission denied (EACCES)"),
+        (OSError("1000000 requested and 24932 written"), "requested and 24932 written"),  # tifffile
+        (RuntimeError('Failed to write pixel data to image file "x.exr". File too large.'), "File too large"),
+        (RuntimeError("NetCDF: HDF error"), "HDF error"),  # netCDF4 on a full disk
+    ],
+)
+def test_write_failures_become_one_line(tmp_path: Path, exc: Exception, needle: str) -> None:
+    err = bio.write_failure(exc, tmp_path / "out")
+    assert isinstance(err, OutputWriteError) and needle in str(err) and "\n" not in str(err)
+    assert str(err).startswith(f"--out = '{tmp_path / 'out'}': cannot write the output")
+
+
+@pytest.mark.parametrize("exc", [RuntimeError("boom"), ValueError("x"), KeyboardInterrupt(), BenchSimError()])
+def test_other_errors_are_not_write_failures(tmp_path: Path, exc: BaseException) -> None:
+    assert bio.write_failure(exc, tmp_path) is None
+
+
+def test_atomic_exchange_swaps_two_folders(tmp_path: Path) -> None:
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir()
+    b.mkdir()
+    (a / "x").write_text("a")
+    (b / "x").write_text("b")
+    if bio._exchange(a, b):  # Linux with renameat2 (every CI machine of this project)
+        assert (a / "x").read_text() == "b" and (b / "x").read_text() == "a"
+    else:  # pragma: no cover - other systems: the two-rename path is tested above
+        assert (a / "x").read_text() == "a"
+
+
+def test_a_folder_from_before_the_completion_record_is_recognised(tmp_path: Path) -> None:
+    """``results/paper`` of earlier versions has no record but metrics.json with provenance."""
+    old = tmp_path / "paper"
+    old.mkdir()
+    (old / "metrics.json").write_text('{"version": "0.1.0", "config_sha256": "ab", "seed": 0}')
+    (old / "fig3_stages.png").write_bytes(b"png")
+    _write_set(old, {"metrics.json": "{}"})
+    assert set(_tree(old)) == {"metrics.json", OUTPUT_MARKER}
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "metrics.json").write_text('{"loss": 0.1}')  # someone else's metrics
+    with pytest.raises(BenchSimError, match="not written by bench_sim"):
+        _write_set(other, {"a.txt": "x"})
