@@ -7,7 +7,7 @@ largest term, what is available and what to lower. The estimates are closed form
 config: array shapes times bytes per element, plus a fixed allowance for the interpreter and
 its libraries and per-element costs of the renderer calibrated against measured peaks
 (``benchmarks/bench_resources.py`` prints estimate / measured for a few sizes). They aim to be
-upper bounds within a factor of about two (2.5 measured at worst), so a run that is refused
+upper bounds within a factor of about two (2.9 measured at worst), so a run that is refused
 would not have fitted.
 
 Available memory is the smallest of ``MemAvailable`` (``/proc/meminfo``), the cgroup limit less
