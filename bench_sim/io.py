@@ -702,14 +702,12 @@ def write_figure_png(
     import io as _io
 
     import matplotlib.pyplot as plt
-    from PIL import Image
 
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    buf = _io.BytesIO()  # encoded once, with the text chunk (Pillow's PngInfo through matplotlib)
+    fig.savefig(buf, format="png", dpi=dpi, pil_kwargs={"pnginfo": _png_info(metadata)})
     plt.close(fig)
-    buf.seek(0)
-    with Image.open(buf) as img, atomic_path(path) as tmp:
-        img.save(tmp, format="PNG", pnginfo=_png_info(metadata))
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(buf.getvalue())
     return Path(path)
 
 

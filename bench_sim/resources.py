@@ -7,7 +7,7 @@ largest term, what is available and what to lower. The estimates are closed form
 config: array shapes times bytes per element, plus a fixed allowance for the interpreter and
 its libraries and per-element costs of the renderer calibrated against measured peaks
 (``benchmarks/bench_resources.py`` prints estimate / measured for a few sizes). They aim to be
-upper bounds within a factor of about two (2.5 measured at worst), so a run that is refused
+upper bounds within a factor of about two (2.9 measured at worst), so a run that is refused
 would not have fitted.
 
 Available memory is the smallest of ``MemAvailable`` (``/proc/meminfo``), the cgroup limit less
@@ -59,9 +59,13 @@ MiB = 1 << 20
 BASE_PROCESS_BYTES = 200 * MiB
 #: Extra for Mitsuba / Dr.Jit with its LLVM backend, the scene and the compiled kernels [bytes].
 BASE_MITSUBA_BYTES = 150 * MiB
-#: Run texture: rasterised values, smeared copy, phase planes and the rasteriser's temporaries,
-#: per texel of the pass [bytes] (about 10 measured).
+#: Run texture held whole (the reference engine's Mitsuba texture): rasterised values, Mitsuba's
+#: copy and the rasteriser's temporaries, per texel of the pass [bytes] (about 10 measured).
 TEXTURE_BYTES_PER_TEXEL = 24
+#: Fast engine's texture per texel of a chunk's window: raw rows, smeared rows, phase planes [bytes].
+WINDOW_BYTES_PER_TEXEL = 12
+#: Rasteriser's work arrays per texel of the block being rasterised (float64 sums and painters).
+RASTER_BYTES_PER_TEXEL = 40
 #: Fast engine: Mitsuba's film and the records' float64 work arrays per record (sub-pixel sample
 #: position), independent of ``spp`` (about 190 measured) [bytes].
 RECORD_BYTES = 256
@@ -221,11 +225,17 @@ def target_memory(cfg: BenchConfig) -> dict[str, int]:
     return terms
 
 
-def _texture_texels(cfg: BenchConfig, frames: int) -> int:
+def _texture_shape(cfg: BenchConfig, frames: int) -> tuple[float, int]:
+    """(rows, columns) of the run texture of ``frames`` line periods."""
     q = cfg.target.texels_per_pixel
     margin = 6  # object pixels of margin on each side (bench_sim.render.texture)
     ny = q * (frames * (1.0 + abs(cfg.timing.sync_error)) + cfg.sensor.rows + 2 * margin + 2)
     nx = q * (1.01 * cfg.sensor.columns + 2 * margin) + 1
+    return ny, int(nx)
+
+
+def _texture_texels(cfg: BenchConfig, frames: int) -> int:
+    ny, nx = _texture_shape(cfg, frames)
     return int(ny * nx)
 
 
@@ -241,12 +251,23 @@ def pass_memory(
     terms = {"interpreter, Mitsuba and libraries": BASE_PROCESS_BYTES + BASE_MITSUBA_BYTES}
     terms.update(target_memory(cfg))
     texels = _texture_texels(cfg, frames)
-    terms[f"run texture ({texels:,} texels for {frames:,} frames)"] = texels * TEXTURE_BYTES_PER_TEXEL
+    whole = texels * TEXTURE_BYTES_PER_TEXEL
+    chunk = 64  # frames rendered per chunk (bench_sim.experiments.simulate)
+    if name == "fast":
+        # rasterised as the pass reaches it: the blocks a texture keeps, one block being
+        # rasterised and a chunk's window (bench_sim.render.texture, bench_sim.render.engines)
+        from bench_sim.render.texture import BLOCK_ROWS, CACHE_BLOCKS
+
+        q, nx = cfg.target.texels_per_pixel, _texture_shape(cfg, frames)[1]
+        window = q * (m + chunk + 8) * nx * WINDOW_BYTES_PER_TEXEL
+        streamed = (CACHE_BLOCKS * 4 + RASTER_BYTES_PER_TEXEL) * BLOCK_ROWS * nx + window
+        terms["run texture (blocks of rows kept, a chunk's window)"] = min(whole, streamed)
+    else:
+        terms[f"run texture ({texels:,} texels for {frames:,} frames)"] = whole
     if name == "fast":
         terms[f"fast-engine records ({r.subpixels}^2 per pixel)"] = m * n * r.subpixels**2 * RECORD_BYTES
     else:
         terms["reference render"] = m * n * REFERENCE_BYTES_PER_PIXEL
-    chunk = 64  # frames rendered per chunk (bench_sim.experiments.simulate)
     terms["frame chunks"] = chunk * (rows or m) * n * (4 + 8 + 8 + 1)
     return terms
 
@@ -270,9 +291,11 @@ def estimate_render(cfg: BenchConfig, frames: int, engine: str | None = None) ->
 
 def _stage_arrays(cfg: BenchConfig, stages: Iterable[int], truth: bool) -> tuple[int, int]:
     """(bytes of the stage words and truth, bytes per stage pixel) for ``stages``."""
+    from bench_sim.sensor.model import word_dtype
+
     s = len(list(stages))
     pix = s * cfg.lines * cfg.sensor.columns
-    per = 4 * 2 + (TRUTH_BYTES_PER_PIXEL if truth else 0)  # words (+ their stacked copy), truth
+    per = word_dtype(cfg.dtdi.beta_bits).itemsize + (TRUTH_BYTES_PER_PIXEL if truth else 0)  # words, truth
     return pix * per, per
 
 
@@ -300,7 +323,7 @@ def estimate_reproduce(cfg: BenchConfig, stages: Iterable[int]) -> ResourceEstim
     arrays, _ = _stage_arrays(cfg, st, truth=False)
     mem = pass_memory(cfg, frames, rows=st[-1])
     mem[f"stage images ({len(st)} stages x {cfg.lines} x {cfg.sensor.columns})"] = arrays
-    mem["fusion, metrics and figure images"] = img * 8 * (12 + len(st))
+    mem["fusion, metrics and figure images"] = img * 8 * 12  # figures draw display-size copies
     mem["figures and DR measurement"] = 150 * MiB
     disk = {
         "gamma1/2.tiff": 2 * img * 2, "gamma_hdr.exr": img * 8, "PNG images and figures": img * 2 + 8 * MiB

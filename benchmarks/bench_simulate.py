@@ -8,7 +8,8 @@ steps of ``reproduce``, and its peak memory at two numbers of lines.
    (:func:`bench_sim.sensor.pipeline.sensor_dtdi_pass`). Prints the ratio (target <= 1).
 2. Memory: peak of numpy's allocations (``tracemalloc``; Mitsuba's own buffers are not seen)
    of ``simulate`` with stages {10, 80} at two line counts, split into what grows with the
-   lines: the requested stage images (dataset) and the render's run texture.
+   lines: the requested stage images (dataset), and the texels the render's run texture holds
+   (a few blocks of rows, rasterised as the pass reaches them).
 
 Usage: python benchmarks/bench_simulate.py [--lines-a 512] [--lines-b 2048] [--skip-time]
 """
@@ -58,7 +59,7 @@ def _peak(cfg) -> tuple[float, float, float]:
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     mib = 1 / 2**20
-    return peak * mib, res.dataset.nbytes * mib, res.setup.grid.values.nbytes * mib
+    return peak * mib, res.dataset.nbytes * mib, res.setup.grid.held_bytes * mib
 
 
 def main() -> None:
@@ -82,13 +83,12 @@ def main() -> None:
         peak, ds_mib, tex_mib = _peak(with_overrides(cfg, {"lines": lines}))
         rows.append((lines, peak, ds_mib, tex_mib))
         print(f"  {lines:6d} lines: peak {peak:8.1f} MiB (numpy), dataset {ds_mib:7.1f} MiB, "
-              f"run texture {tex_mib:7.1f} MiB")
+              f"run texture held {tex_mib:7.1f} MiB")
     (l1, p1, d1, t1), (l2, p2, d2, t2) = rows
     per_line = 2**20 / (l2 - l1)
     kib = per_line / 1024
     print(f"  growth per line: peak {(p2 - p1) * kib:.1f} KiB, of which stage images {(d2 - d1) * kib:.1f} "
-          f"KiB and the render's run texture {(t2 - t1) * kib:.1f} KiB (held twice by the fast engine: "
-          "values + smeared phase planes)")
+          f"KiB and the render's run texture {(t2 - t1) * kib:.1f} KiB (the blocks of rows it keeps)")
 
 
 if __name__ == "__main__":

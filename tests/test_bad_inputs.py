@@ -359,7 +359,9 @@ HUGE: list[tuple[str, list[str], str, list[str]]] = [
     ("65536^2 dead leaves", ["simulate", "{cfg}"],
      "[target]\nlayout = 'dead_leaves'\npanel_lines = 65536\npanel_columns = 65536\n",
      ["not enough memory", "target panel map"]),
-    ("reproduce 10^6 lines", ["reproduce", "{cfg}"], "lines = 1000000\n[target]\npanel_lines = 96\n",
+    # the render streams its texture, so what cannot fit is the run's images: 10^6 lines x 1024
+    ("reproduce 10^6 lines", ["reproduce", "{cfg}"],
+     "lines = 1000000\n[sensor]\ncolumns = 1024\n[target]\npanel_lines = 96\npanel_columns = 1024\n",
      ["not enough memory"]),
     ("fuse huge images", ["fuse", "{d}/huge.npy", "{d}/huge.npy"], "", ["not enough memory", "200000"]),
 ]

@@ -43,7 +43,10 @@ def test_word_limited_gain_over_gamma2_is_eq15_by_construction(dr12: ChainDR) ->
     construction: the HDR is Gamma2 at the dark end (same SNR = 1 point) and Gamma1 x mu2/mu1 at
     the bright end."""
     assert dr12.gain_over_gamma2_by_construction
-    assert abs(dr12.gain_over_gamma2_db - dr_increase_eq15_db(MU1, MU2)) <= 0.3
+    # the two measured saturation points (EMVA variance maxima of 2 x 32 x 64 pixels per level)
+    # scatter: over 30 seeds the gain's standard deviation is 0.25 - 0.36 dB (before / after the
+    # sensor pass drew its noise per chunk of frames), so 0.75 dB is 2 - 3 sigma
+    assert abs(dr12.gain_over_gamma2_db - dr_increase_eq15_db(MU1, MU2)) <= 0.75
     img = dr12.images
     assert img["hdr"].photons_min == pytest.approx(img["gamma2"].photons_min)
     assert img["hdr"].photons_sat == pytest.approx(img["gamma1"].photons_sat, rel=0.02)

@@ -5,6 +5,8 @@ backend; written atomically as PNG with the provenance in the ``bench_sim`` text
 
 from __future__ import annotations
 
+import gc
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -13,22 +15,64 @@ import numpy as np
 
 from bench_sim.io import write_figure_png
 
-__all__ = ["stage_display", "fig3_stages", "fig4_hdr", "snr_versus_signal_figure", "Box"]
+__all__ = [
+    "stage_display", "fig3_stages", "fig4_hdr", "snr_versus_signal_figure", "Box", "import_in_background"
+]
 
 #: (line0, line1, col0, col1) of an inset, in output-image pixels
 Box = tuple[int, int, int, int]
+#: Largest canvas of Fig. 3 [pixels]: panels of many lines are drawn at a lower resolution
+MAX_FIGURE_PIXELS = 2.0e6
+
+
+def _import_matplotlib() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401
+
+
+def import_in_background() -> None:
+    """Import matplotlib (Agg) in a background thread, so that a caller drawing figures at its
+    end does not wait for the import (about a second) after its computation."""
+    import threading
+
+    threading.Thread(target=_import_matplotlib, name="bench_sim-import-matplotlib", daemon=True).start()
 
 
 def stage_display(stage_dn: np.ndarray, beta: int, gamma: float = 2.2) -> np.ndarray:
-    """One display scale for every stage image: ``(DN / (2**beta - 1)) ** (1/gamma)`` in 0..1."""
-    return np.clip(np.asarray(stage_dn, dtype=np.float64) / (2**beta - 1), 0.0, 1.0) ** (1.0 / gamma)
+    """One display scale for every stage image: ``(DN / (2**beta - 1)) ** (1/gamma)`` in 0..1
+    (float32)."""
+    x = np.asarray(stage_dn, dtype=np.float32) / np.float32(2**beta - 1)
+    np.clip(x, 0.0, 1.0, out=x)
+    return x ** np.float32(1.0 / gamma)
+
+
+def _for_display(img: np.ndarray, panel_px: float) -> np.ndarray:
+    """``img`` area-averaged by the largest whole factor that keeps it at least ``panel_px``
+    pixels wide: what a panel of that width cannot show anyway (the figure resamples less)."""
+    from bench_sim.rig.target_sources import area_resize
+
+    h, w = img.shape
+    f = max(1, int(w // panel_px))
+    return img if f == 1 else area_resize(img, max(h // f, 1), w // f)
+
+
+def _save(path: Path, fig: Any, meta: Mapping[str, Any]) -> Path:
+    """:func:`bench_sim.io.write_figure_png` (which closes the figure), then give the figure's
+    memory back now rather than at the next cyclic garbage collection."""
+    out = write_figure_png(path, fig, meta, dpi=fig.dpi)
+    gc.collect()
+    return out
 
 
 def fig3_stages(
     stages: Mapping[int, np.ndarray], order: Sequence[int], beta: int, path: Path, meta: Mapping[str, Any]
 ) -> Path:
     """Fig. 3: the stage images ``order`` (e.g. 5, 10, ..., 100) in a grid, one display scale
-    (:func:`stage_display`), each panel labelled ``(a) m = 5`` etc."""
+    (:func:`stage_display`), each panel labelled ``(a) m = 5`` etc. The canvas holds at most
+    :data:`MAX_FIGURE_PIXELS` (110 dpi up to that), and each image is area-averaged to what its
+    panel can show before it is drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -38,19 +82,24 @@ def fig3_stages(
     cols = 5
     rows = -(-n // cols)
     h, w = next(iter(stages.values())).shape
-    fig, axes = plt.subplots(rows, cols, figsize=(cols * 2.4, rows * 2.4 * h / w + 0.6), dpi=110)
+    panel_in = 2.4
+    size_in = (cols * panel_in, rows * panel_in * h / w + 0.6)
+    # at most MAX_FIGURE_PIXELS: long runs (tall panels) get a lower resolution, not a larger canvas
+    dpi = min(110.0, math.sqrt(MAX_FIGURE_PIXELS / (size_in[0] * size_in[1])))
+    fig, axes = plt.subplots(rows, cols, figsize=size_in, dpi=dpi)
     for k, ax in enumerate(np.atleast_1d(axes).ravel()):
         ax.set_axis_off()
         if k >= n:
             continue
         m = order[k]
-        ax.imshow(stage_display(stages[m], beta), cmap="gray", vmin=0, vmax=1, interpolation="antialiased")
-        ax.set_title(f"({chr(ord('a') + k)}) m = {m}", fontsize=9)
+        img = _for_display(stages[m], panel_in * dpi)  # mean DN over the pixels a dot shows
+        ax.imshow(stage_display(img, beta), cmap="gray", vmin=0, vmax=1, interpolation="antialiased")
+        ax.set_title(f"({chr(ord('a') + k)}) m = {m}", fontsize=9, y=1.0)  # y: no auto placement
     fig.suptitle(
         f"DTDI stage images, one display scale: (DN / {2**beta - 1})^(1/2.2)", fontsize=10
     )
     fig.tight_layout()
-    return write_figure_png(path, fig, meta, dpi=fig.dpi)
+    return _save(path, fig, meta)
 
 
 def fig4_hdr(
@@ -82,8 +131,12 @@ def fig4_hdr(
         (big[0], hdr_display, "(a) $\\Gamma_{HDR}$ (linear display)"),
         (big[1], tra, f"(b) $\\Gamma_{{TRA}}$ ({tra_name} transform)"),
     ):
-        ax.imshow(img, cmap="gray", vmin=0, vmax=1)
-        ax.set_title(title, fontsize=10)
+        # area-averaged to what the axes show; extent keeps the full-resolution coordinates
+        h, w = img.shape
+        box = ax.get_window_extent()
+        shown = _for_display(img, w * min(box.width / w, box.height / h))
+        ax.imshow(shown, cmap="gray", vmin=0, vmax=1, extent=(-0.5, w - 0.5, h - 0.5, -0.5))
+        ax.set_title(title, fontsize=10, y=1.0)
         ax.set_axis_off()
         for box, colour in ((dark_box, "tab:cyan"), (bright_box, "tab:orange")):
             l0, l1, c0, c1 = box
@@ -113,7 +166,7 @@ def fig4_hdr(
             s.set_linewidth(2)
     fig.text(0.5, 0.005, "insets stretched to their own 0.5-99.5 % range", ha="center", fontsize=8)
     fig.tight_layout()
-    return write_figure_png(path, fig, meta, dpi=fig.dpi)
+    return _save(path, fig, meta)
 
 
 def snr_versus_signal_figure(
@@ -177,4 +230,4 @@ def snr_versus_signal_figure(
     ax.legend(fontsize=8, loc="upper left")
     ax.grid(True, which="both", alpha=0.25)
     fig.tight_layout()
-    return write_figure_png(path, fig, meta, dpi=fig.dpi)
+    return _save(path, fig, meta)

@@ -122,7 +122,7 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
     refl = {p.name: p.reflectance for p in panel.patches}
     # the darkest and brightest patches in the scene as lit: lowest / highest mean photons (the
     # truth) or mean of Gamma_HDR
-    truth = "photons" in sim.dataset
+    truth = sim.truth  # (without building the dataset when there is none)
     scene = sim.dataset["photons"].sel(stage=mu2).values if truth else fused.hdr
     level = {k: float(scene[v].mean()) for k, v in wedge.items()}
     darkest = min(wedge, key=level.__getitem__)

@@ -189,6 +189,9 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     frames = lines + max(stages) - 1
     t_start = time.perf_counter()
     timer = _Timer()
+    from bench_sim.experiments.figures import import_in_background
+
+    import_in_background()  # ready when the figures are drawn
     rng = np.random.default_rng(seed)
 
     # 1-2. render every frame of the pass and stream it through the sensor and DTDI
@@ -205,7 +208,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         sim = run_pass(
             cfg, stages, rng, truth=False, on_frames=lambda n: progress.update(task, advance=n)
         )
-    for step in ("render_setup", "render_frames", "sensor_dtdi"):
+    for step in ("render_setup", "render_frames", "sensor_dtdi", "pass_wall"):
         timer.add(step, sim.timings_s[step])
     setup, stage_images = sim.setup, sim.stage_dn
     g1, g2 = stage_images[mu1], stage_images[mu2]
@@ -341,23 +344,27 @@ def _write_outputs(
 ) -> None:
     from bench_sim.experiments.figures import fig3_stages, fig4_hdr, stage_display
     from bench_sim.io import atomic_path, write_exr, write_png, write_tiff16
+    from bench_sim.parallel import start
 
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
     g1, g2 = stage_images[mu1], stage_images[mu2]
-    write_tiff16(out / "gamma1.tiff", g1, dict(meta, image=f"Gamma1, stage {mu1} [DN]"))
-    write_tiff16(out / "gamma2.tiff", g2, dict(meta, image=f"Gamma2, stage {mu2} [DN]"))
-    write_exr(
-        out / "gamma_hdr.exr",
-        {"Y": fused.hdr, "source": fused.source.astype(np.float32)},
-        dict(meta, image=f"Gamma_HDR (eq. 11) [DN, stage-{mu2} units]; source = stage used"),
-    )
-    write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})"))
+    # the image files are written on the thread pool while the figures are drawn here
+    files_written = start([
+        lambda: write_tiff16(out / "gamma1.tiff", g1, dict(meta, image=f"Gamma1, stage {mu1} [DN]")),
+        lambda: write_tiff16(out / "gamma2.tiff", g2, dict(meta, image=f"Gamma2, stage {mu2} [DN]")),
+        lambda: write_exr(
+            out / "gamma_hdr.exr",
+            {"Y": fused.hdr, "source": fused.source.astype(np.float32)},
+            dict(meta, image=f"Gamma_HDR (eq. 11) [DN, stage-{mu2} units]; source = stage used"),
+        ),
+        lambda: write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})")),
+    ])
     fig3_stages(stage_images, fig3, beta, out / "fig3_stages.png", meta)
     dark_box, bright_box = _inset_boxes(panel, cfg, lines)
     dark, bright = metrics["darkest_patch"], metrics["brightest_patch"]
     fig4_hdr(
-        np.clip(fused.hdr / fused.full_scale_dn, 0, 1),
-        tra8 / 255.0,
+        np.clip(fused.hdr.astype(np.float32) / np.float32(fused.full_scale_dn), 0, 1),
+        tra8 / np.float32(255.0),
         stage_display(g1, beta),
         stage_display(g2, beta),
         dark_box,
@@ -396,3 +403,4 @@ def _write_outputs(
     w.writerow(["# version", metrics["version"]])
     with atomic_path(out / "table1.csv") as tmp:
         tmp.write_text(buf.getvalue())
+    files_written()

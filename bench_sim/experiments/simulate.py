@@ -8,7 +8,7 @@ physical sensor, the truth (:mod:`bench_sim.render.stage_truth`). The result is 
 :class:`xarray.Dataset` with dimensions ``stage``, ``line``, ``column``:
 
 =============== ======================================================================
-``dn``          stage words (uint32, ``0 .. 2**beta - 1``)
+``dn``          stage words (``0 .. 2**beta - 1``; uint16 up to beta = 16, else uint32)
 ``mean_dn``     exact expectation of ``dn`` before the word clips (fixed patterns in)
 ``photons``     mean photons collected by the stage pixel (its ``m`` rows, smear in)
 ``reflectance`` target reflectance integrated by the pixel's ``m`` footprints
@@ -19,15 +19,18 @@ physical sensor, the truth (:mod:`bench_sim.render.stage_truth`). The result is 
 
 Attributes carry the resolved config as TOML text, its SHA-256, the seed, the version, the
 engine and the Mitsuba variant. Random numbers come from one generator seeded with ``seed``,
-drawn in a fixed order (render seed, fixed pattern, then the temporal noise chunk by chunk), so
-the same config and seed give identical data; ``reproduce`` runs its pass through
-:func:`run_pass` with its own generator.
+drawn in a fixed order (render seed, fixed pattern, then the seed of the temporal noise, from
+which every chunk of frames spawns its own stream), so the same config and seed give identical
+data with any number of threads; ``reproduce`` runs its pass through :func:`run_pass` with its
+own generator. Rendering runs a chunk ahead in its own thread and the chunks of frames are
+exposed on the thread pool (:mod:`bench_sim.parallel`) while the stages accumulate in order.
 """
 
 from __future__ import annotations
 
+import functools
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -118,19 +121,35 @@ class PassResult:
     ----------
     dataset
         The simulation (see the module docstring); without ``mean_dn``, ``photons``,
-        ``reflectance`` and ``clipped`` when run with ``truth=False``.
+        ``reflectance`` and ``clipped`` when run with ``truth=False``. Built when first read
+        (a caller that only needs ``stage_dn`` does not import xarray).
     stage_dn
-        Stage ``m`` -> (lines, N) ``uint32`` words (the arrays behind ``dataset.dn``).
+        Stage ``m`` -> (lines, N) stage words, ``uint16`` for ``beta <= 16`` (the default 12),
+        else ``uint32`` (:func:`bench_sim.sensor.model.word_dtype`; the arrays behind
+        ``dataset.dn``).
     setup
         The render set-up (geometry, target grid and panel, engine info, backend).
+    truth
+        Whether the pass computed the truth (``dataset`` then has ``mean_dn``, ``photons``,
+        ``reflectance``, ``clipped``); reading it does not build the dataset.
     timings_s
-        Seconds per step: ``render_setup``, ``render_frames``, ``sensor_dtdi``, ``truth``.
+        Seconds per step: ``render_setup``; ``render_frames``, ``sensor_dtdi``, ``truth``
+        (busy time of each; rendering runs ahead in its own thread and the chunks are exposed
+        on the thread pool, so they overlap); ``pass_wall``, the wall time of the streaming
+        pass they share.
     """
 
-    dataset: xr.Dataset
     stage_dn: dict[int, np.ndarray]
     setup: RenderSetup
     timings_s: dict[str, float] = field(default_factory=dict)
+    make_dataset: Callable[[], xr.Dataset] | None = field(default=None, repr=False)
+    truth: bool = False
+
+    @functools.cached_property
+    def dataset(self) -> xr.Dataset:
+        if self.make_dataset is None:
+            raise BenchSimError("PassResult: no dataset")
+        return self.make_dataset()
 
 
 def _pedestal_dn(cfg: BenchConfig) -> float:
@@ -140,7 +159,7 @@ def _pedestal_dn(cfg: BenchConfig) -> float:
 def run_pass(
     cfg: BenchConfig,
     stages: Iterable[int],
-    seed: int | np.random.Generator,
+    seed: int | np.random.SeedSequence | np.random.Generator,
     *,
     truth: bool = True,
     on_frames: Callable[[int], None] | None = None,
@@ -156,48 +175,55 @@ def run_pass(
     stages
         Stages to output, each in ``1 .. sensor.rows`` (validated by :func:`check_stages`).
     seed
-        Root seed, or a generator to draw from (consumed in this order: one integer for the
-        renderer, the sensor's fixed pattern, then the temporal noise of every chunk of
-        :data:`SENSOR_CHUNK_FRAMES` frames of rows ``0 .. max(stages) - 1``).
+        Root seed, a ``SeedSequence`` (a sample's or sweep point's stream) or a generator to
+        draw from, consumed in this order: one integer for the renderer (reference engine),
+        the sensor's fixed pattern, then one ``SeedSequence`` of the temporal noise, from which
+        chunk ``c`` of :data:`SENSOR_CHUNK_FRAMES` frames (rows ``0 .. max(stages) - 1``) gets
+        its own generator (:func:`bench_sim.parallel.chunk_generator`): the result does not
+        depend on the number of threads (``BENCH_SIM_THREADS``).
     truth
         Also compute ``mean_dn``, ``photons``, ``reflectance`` and ``clipped``.
     on_frames
         Called with the number of frames after every rendered chunk (progress bars).
     """
-    import xarray as xr
-
     from bench_sim import __version__
     from bench_sim.config import config_sha256, config_to_toml_text
+    from bench_sim.parallel import prefetch, seed_sequence
     from bench_sim.render.exposures import iter_photon_frames, prepare
     from bench_sim.render.stage_truth import (
         StageSums,
+        reflectance_rows,
         row_footprints,
         stage_dark_offset_dn,
         stage_mean_dn,
         stage_reflectance,
     )
     from bench_sim.sensor.dtdi import DTDIAccumulator, frames_needed, full_scale_dn
-    from bench_sim.sensor.emva import draw_fixed_pattern, expose
+    from bench_sim.sensor.emva import draw_fixed_pattern
+    from bench_sim.sensor.model import word_dtype
+    from bench_sim.sensor.pipeline import iter_exposed
 
     st = check_stages(stages, cfg.sensor.rows)
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(int(seed))
+    rng = np.random.default_rng(seed)  # a Generator is used as is
     lines, n_cols = cfg.lines, cfg.sensor.columns
     n_rows = st[-1]
     frames = frames_needed(lines, st)
     beta, ped = cfg.dtdi.beta_bits, _pedestal_dn(cfg)
     clip_word = full_scale_dn(beta) - 1
-    timings = {"render_setup": 0.0, "render_frames": 0.0, "sensor_dtdi": 0.0, "truth": 0.0}
+    timings = {"render_setup": 0.0, "render_frames": 0.0, "sensor_dtdi": 0.0, "truth": 0.0, "pass_wall": 0.0}
 
     t0 = time.perf_counter()
     setup = prepare(cfg, frames, rng)
     timings["render_setup"] = time.perf_counter() - t0
     t_int = setup.geom.t_int_s
     fixed = draw_fixed_pattern(cfg.sensor, rng)
+    noise = seed_sequence(rng)
     fp = fixed if n_rows == cfg.sensor.rows else fixed.window(n_rows, n_cols)
     acc = DTDIAccumulator(
         n_cols, st, beta, cfg.sensor.black_offset_dn, cfg.dtdi.subtract_black, pedestal_dn=ped
     )
-    dn = {m: np.empty((lines, n_cols), dtype=np.uint32) for m in st}
+    dn_all = np.empty((len(st), lines, n_cols), dtype=word_dtype(beta))
+    dn = {m: dn_all[s] for s, m in enumerate(st)}
     done = dict.fromkeys(st, 0)
     if truth:
         t0 = time.perf_counter()
@@ -223,93 +249,114 @@ def run_pass(
         start = refl_done
         while start < upto:
             stop = min(start + TRUTH_BAND_LINES, upto)
+            q = setup.grid.q
+            r0, r1 = reflectance_rows(footprints, q, st[-1], start, stop)
+            band = setup.grid.rows(r0, r1)
             for s, m in enumerate(st):
-                reflectance[s, start:stop] = stage_reflectance(
-                    setup.grid.values, setup.grid.q, footprints, m, start, stop
-                )
+                reflectance[s, start:stop] = stage_reflectance(band, q, footprints, m, start, stop, row0=r0)
             start = stop
         return start
 
-    frames_iter = iter_photon_frames(setup, chunk=RENDER_CHUNK_FRAMES)
-    while True:
-        t0 = time.perf_counter()
-        chunk = next(frames_iter, None)
-        timings["render_frames"] += time.perf_counter() - t0
-        if chunk is None:
-            break
-        for c0 in range(0, chunk.shape[0], SENSOR_CHUNK_FRAMES):
+    def rendered() -> Iterator[np.ndarray]:
+        # runs ahead in its own thread (prefetch): the next chunk renders while this one is exposed
+        frames_iter = iter_photon_frames(setup, chunk=RENDER_CHUNK_FRAMES)
+        while True:
             t0 = time.perf_counter()
-            ph = chunk[c0 : c0 + SENSOR_CHUNK_FRAMES, :n_rows]
-            sat = np.empty(ph.shape, dtype=bool) if truth else None
-            raw = expose(ph, cfg.sensor, fp, t_int, rng, saturated=sat)
-            for m, block in acc.push_many(raw).items():
-                take = block[: max(lines - done[m], 0)]
-                dn[m][done[m] : done[m] + len(take)] = take
-                done[m] += len(take)
-            t1 = time.perf_counter()
-            timings["sensor_dtdi"] += t1 - t0
-            if truth:
-                stack = np.empty((ph.shape[0], n_rows, 3, n_cols), dtype=np.float64)
-                stack[:, :, 0] = ph
-                np.multiply(ph, gain, out=stack[:, :, 1])
-                stack[:, :, 2] = sat
-                for frame in stack:
-                    for m, line in sums.push(frame).items():
-                        s, j = st.index(m), truth_done[m]
-                        if j < lines:
-                            photons[s, j] = line[0]
-                            mean_dn[s, j] = stage_mean_dn(line[1], cfg.sensor, offsets[m])
-                            clipped[s, j] = line[2] > 0
-                            truth_done[m] = j + 1
-                complete = min(truth_done.values())
-                if complete - refl_done >= TRUTH_BAND_LINES or complete == lines:
-                    refl_done = reflectance_band(complete)
-                timings["truth"] += time.perf_counter() - t1
+            chunk = next(frames_iter, None)
+            timings["render_frames"] += time.perf_counter() - t0
+            if chunk is None:
+                return
+            yield chunk
+
+    def pieces() -> Iterator[np.ndarray]:
+        for chunk in prefetch(rendered()):
+            for c0 in range(0, chunk.shape[0], SENSOR_CHUNK_FRAMES):
+                yield chunk[c0 : c0 + SENSOR_CHUNK_FRAMES, :n_rows]
+
+    t_pass = time.perf_counter()
+    for got in iter_exposed(pieces(), cfg.sensor, fp, t_int, noise, saturated=truth):
+        t0 = time.perf_counter()
+        for m, block in acc.push_many(got.dn).items():
+            take = block[: max(lines - done[m], 0)]
+            dn[m][done[m] : done[m] + len(take)] = take
+            done[m] += len(take)
+        t1 = time.perf_counter()
+        timings["sensor_dtdi"] += got.seconds + t1 - t0
+        if truth:
+            ph = got.photons
+            stack = np.empty((ph.shape[0], n_rows, 3, n_cols), dtype=np.float64)
+            stack[:, :, 0] = ph
+            np.multiply(ph, gain, out=stack[:, :, 1])
+            stack[:, :, 2] = got.saturated
+            for frame in stack:
+                for m, line in sums.push(frame).items():
+                    s, j = st.index(m), truth_done[m]
+                    if j < lines:
+                        photons[s, j] = line[0]
+                        mean_dn[s, j] = stage_mean_dn(line[1], cfg.sensor, offsets[m])
+                        clipped[s, j] = line[2] > 0
+                        truth_done[m] = j + 1
+            complete = min(truth_done.values())
+            if complete - refl_done >= TRUTH_BAND_LINES or complete == lines:
+                refl_done = reflectance_band(complete)
+            timings["truth"] += time.perf_counter() - t1
         if on_frames is not None:
-            on_frames(chunk.shape[0])
+            on_frames(got.photons.shape[0])
+    timings["pass_wall"] = time.perf_counter() - t_pass
     if min(done.values()) < lines:
         raise BenchSimError(f"simulate: the pass gave only {min(done.values())} of {lines} lines")
 
-    coords = {"stage": np.asarray(st, dtype=np.int64), "line": np.arange(lines), "column": np.arange(n_cols)}
-    dims = ("stage", "line", "column")
-    data: dict[str, Any] = {"dn": (dims, np.stack([dn[m] for m in st]))}
     if truth:
         t0 = time.perf_counter()
-        clipped |= data["dn"][1] >= clip_word
-        data.update(mean_dn=(dims, mean_dn), photons=(dims, photons), reflectance=(dims, reflectance),
-                    clipped=(dims, clipped))
+        clipped |= dn_all >= clip_word
         timings["truth"] += time.perf_counter() - t0
-    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    if mu1 in st and mu2 in st:
-        from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 
-        kw = {"pedestal_dn": ped} if ped else {}
-        fused = fuse_dtdi_hdr_eq11(dn[mu1], dn[mu2], mu1=mu1, mu2=mu2, beta=beta, **kw)
-        data["hdr"] = (("line", "column"), fused.hdr.astype(np.float32))
-        data["hdr_source"] = (("line", "column"), fused.source.astype(np.int16))
-    ds = xr.Dataset(data, coords=coords)
-    for name, var in ds.data_vars.items():
-        units, long_name = VARIABLES[name]
-        var.attrs.update(units=units, long_name=long_name)
-    ds["line"].attrs.update(units="1", long_name="scene line (material at line * delta along the track)")
-    ds["column"].attrs.update(units="1", long_name="sensor column")
-    ds["stage"].attrs.update(units="1", long_name="DTDI stage m (rows summed)")
-    ds.attrs.update(
-        title=f"bench_sim simulation of {cfg.name}",
-        config=config_to_toml_text(cfg),
-        config_sha256=config_sha256(cfg),
-        seed=int(seed) if not isinstance(seed, np.random.Generator) else -1,
-        version=__version__,
-        engine=str(setup.info["engine"]),
-        variant=str(setup.info["variant"]),
-        beta_bits=int(beta),
-        pedestal_dn=ped,
-        t_int_s=float(t_int),
-        frames=int(frames),
-    )
-    if mu1 in st and mu2 in st:
-        ds.attrs.update(mu1=int(mu1), mu2=int(mu2))
-    return PassResult(ds, dn, setup, timings)
+    def make_dataset() -> xr.Dataset:
+        import xarray as xr
+
+        coords = {
+            "stage": np.asarray(st, dtype=np.int64), "line": np.arange(lines), "column": np.arange(n_cols)
+        }
+        dims = ("stage", "line", "column")
+        data: dict[str, Any] = {"dn": (dims, dn_all)}
+        if truth:
+            data.update(mean_dn=(dims, mean_dn), photons=(dims, photons), reflectance=(dims, reflectance),
+                        clipped=(dims, clipped))
+        mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
+        if mu1 in st and mu2 in st:
+            from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+
+            kw = {"pedestal_dn": ped} if ped else {}
+            fused = fuse_dtdi_hdr_eq11(dn[mu1], dn[mu2], mu1=mu1, mu2=mu2, beta=beta, **kw)
+            data["hdr"] = (("line", "column"), fused.hdr.astype(np.float32))
+            data["hdr_source"] = (("line", "column"), fused.source.astype(np.int16))
+        ds = xr.Dataset(data, coords=coords)
+        for name, var in ds.data_vars.items():
+            units, long_name = VARIABLES[name]
+            var.attrs.update(units=units, long_name=long_name)
+        ds["line"].attrs.update(units="1", long_name="scene line (material at line * delta along the track)")
+        ds["column"].attrs.update(units="1", long_name="sensor column")
+        ds["stage"].attrs.update(units="1", long_name="DTDI stage m (rows summed)")
+        ds.attrs.update(
+            title=f"bench_sim simulation of {cfg.name}",
+            config=config_to_toml_text(cfg),
+            config_sha256=config_sha256(cfg),
+            seed=int(seed) if isinstance(seed, int | np.integer) else -1,
+            version=__version__,
+            engine=str(setup.info["engine"]),
+            variant=str(setup.info["variant"]),
+            beta_bits=int(beta),
+            pedestal_dn=ped,
+            t_int_s=float(t_int),
+            frames=int(frames),
+        )
+        if isinstance(seed, np.random.SeedSequence):
+            ds.attrs.update(seed_entropy=str(seed.entropy), seed_spawn_key=str(list(seed.spawn_key)))
+        if mu1 in st and mu2 in st:
+            ds.attrs.update(mu1=int(mu1), mu2=int(mu2))
+        return ds
+
+    return PassResult(dn, setup, timings, make_dataset, truth=truth)
 
 
 def simulate(

@@ -32,6 +32,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.parallel import parallel_map, thread_count
 from bench_sim.render.records import (
     REFERENCE_IRRADIANCE_W_M2,
     light_power_w_m2,
@@ -171,8 +172,9 @@ class FastEngine:
             if name in emitting
         ]
         self.kernels = self._cached_kernels()
-        self._combined: dict[tuple[float, ...], list[np.ndarray]] = {}
-        self._smeared = smear_filter(grid.values, grid.h_y_m, geom.smear_m)
+        self._combined: dict[tuple[float, ...], tuple[list[np.ndarray], np.ndarray]] = {}
+        # texel rows beyond a smeared row that its box filter reads
+        self._smear_rows = int(np.ceil(geom.smear_m / grid.h_y_m)) + 1
 
     def _cached_kernels(self) -> list[_RowKernel]:
         grid = self.grid
@@ -231,13 +233,17 @@ class FastEngine:
             out[li] = scale * frame_weights(self.cfg, name, k0, k1)
         return out
 
-    def _combined_kernels(self, coeffs: tuple[float, ...]) -> list[np.ndarray]:
-        """Per row, the kernels of all lights weighted by ``coeffs`` and summed (cached)."""
+    def _combined_kernels(self, coeffs: tuple[float, ...]) -> tuple[list[np.ndarray], np.ndarray]:
+        """The kernels and static radiance (M, N) of all lights weighted by ``coeffs`` and summed
+        (cached: steady lights keep their coefficients from chunk to chunk)."""
         got = self._combined.get(coeffs)
         if got is None:
             c = np.asarray(coeffs, dtype=np.float32)
-            got = [np.tensordot(c, k.weights, axes=1).astype(np.float32) for k in self.kernels]
-            self._combined = {coeffs: got}  # one set: steady lights keep their coefficients
+            got = (
+                [np.tensordot(c, k.weights, axes=1).astype(np.float32) for k in self.kernels],
+                np.tensordot(c, self.records.static, axes=1).astype(np.float32),
+            )
+            self._combined = {coeffs: got}
         return got
 
     def _window(self, k0: int, k1: int) -> tuple[int, list[list[np.ndarray]]]:
@@ -247,9 +253,13 @@ class FastEngine:
         lo = min(k.base_y for k in self.kernels) - a0 + k0 * q
         hi = max(k.base_y + k.weights.shape[1] for k in self.kernels) - a0 + (k1 - 1) * q + 1
         w0 = (lo // q) * q
-        if w0 < 0 or hi > self.grid.shape[0]:
+        ny = self.grid.shape[0]
+        if w0 < 0 or hi > ny:
             raise RuntimeError("fast engine: frame outside the run texture")
-        win = self._smeared[w0:hi]
+        # the smear reads up to _smear_rows rows further on (clamped at the grid's end, as
+        # smear_filter does for the whole grid)
+        raw = self.grid.rows(w0, min(hi + self._smear_rows, ny))
+        win = smear_filter(raw, self.grid.h_y_m, self.geom.smear_m)[: hi - w0]
         return w0, [[np.ascontiguousarray(win[a::q, b::q]) for b in range(q)] for a in range(q)]
 
     def radiance_frames(self, k0: int, k1: int) -> np.ndarray:
@@ -260,15 +270,13 @@ class FastEngine:
         coeffs = self.light_coefficients(k0, k1)
         steady = [li for li in range(coeffs.shape[0]) if np.all(coeffs[li] == coeffs[li, 0])]
         varying = [li for li in range(coeffs.shape[0]) if li not in steady]
-        combined = self._combined_kernels(tuple(float(coeffs[li, 0]) if li in steady else 0.0
-                                                for li in range(coeffs.shape[0])))
-        static = np.tensordot(coeffs.T.astype(np.float32), self.records.static, axes=1)  # (nk, M, N)
+        steady_coeffs = tuple(float(coeffs[li, 0]) if li in steady else 0.0 for li in range(coeffs.shape[0]))
+        combined, static_steady = self._combined_kernels(steady_coeffs)
+        static_varying = [(coeffs[li].astype(np.float32)[:, None], self.records.static[li]) for li in varying]
         w0, planes = self._window(k0, k1)
         out = np.empty((nk, cfg.sensor.rows, N), dtype=np.float32)
-        acc = np.empty((nk, N), dtype=np.float32)
-        tmp = np.empty((nk, N), dtype=np.float32)
 
-        def apply(kern: _RowKernel, weights: np.ndarray, into: np.ndarray) -> None:
+        def apply(kern: _RowKernel, weights: np.ndarray, into: np.ndarray, tmp: np.ndarray) -> None:
             ty, tx = weights.shape[:2]
             for a in range(ty):
                 ya = kern.base_y + a - a0 + k0 * q - w0
@@ -280,14 +288,25 @@ class FastEngine:
                     np.multiply(plane[r0 : r0 + nk, c0 : c0 + N], weights[a, b], out=tmp)
                     into += tmp
 
-        part = np.empty((nk, N), dtype=np.float32) if varying else None
-        for i, kern in enumerate(self.kernels):
-            acc[...] = static[:, i]
-            apply(kern, combined[i], acc)
-            for li in varying:
-                part[...] = 0.0
-                apply(kern, kern.weights[li], part)
-                part *= coeffs[li].astype(np.float32)[:, None]
-                acc += part
-            out[:, i, :] = acc
+        def rows(band: range) -> None:
+            acc = np.empty((nk, N), dtype=np.float32)
+            tmp = np.empty((nk, N), dtype=np.float32)
+            part = np.empty((nk, N), dtype=np.float32)
+            for i in band:
+                kern = self.kernels[i]
+                acc[...] = static_steady[i]
+                for w, s0 in static_varying:
+                    acc += w * s0[i]
+                apply(kern, combined[i], acc, tmp)
+                for li in varying:
+                    part[...] = 0.0
+                    apply(kern, kern.weights[li], part, tmp)
+                    part *= coeffs[li].astype(np.float32)[:, None]
+                    acc += part
+                out[:, i, :] = acc
+
+        # each row is computed whole by one task: the result does not depend on the split
+        M = cfg.sensor.rows
+        n_bands = min(M, 4 * thread_count())
+        parallel_map(rows, [range(M * b // n_bands, M * (b + 1) // n_bands) for b in range(n_bands)])
         return out

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import constants, ndimage, special
+from scipy import constants
 
 __all__ = [
     "PLANCK_J_S",
@@ -111,6 +111,8 @@ def airy_pixel_kernel(
     integrated over each pixel cell on an ``oversample``-times finer grid. The kernel extends to
     the fifth dark ring (or at least one pixel).
     """
+    from scipy import special  # imported here: only runs with the PSF need scipy's start-up
+
     lam_n = wavelength_m * working_f_number
     radius_m = 5.0 * 1.22 * lam_n
     r = max(1, math.ceil(radius_m / pixel_pitch_m - 0.5))
@@ -126,5 +128,7 @@ def airy_pixel_kernel(
 
 def apply_psf(frames: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """Convolve each frame (last two axes) with a small PSF kernel; edges replicate."""
+    from scipy import ndimage
+
     k = kernel.reshape((1,) * (frames.ndim - 2) + kernel.shape)
     return ndimage.convolve(frames, k, mode="nearest")

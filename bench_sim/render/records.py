@@ -203,6 +203,9 @@ def _render_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, key: str) -> L
             s0 = render_array(mi, mi.load_dict(scene(0.0, [name], False)), spp, RECORD_SEED)[..., 0]
         d_rec[li] = lit - s0
         static[li] = s0.reshape(M, ss, N, ss).mean(axis=(1, 3))
+    import drjit as dr
+
+    dr.flush_malloc_cache()  # the renders' buffers: give them back, the pass needs none of them
     return LightRecords(
         tuple(names), d_rec, static, position, hit, key, mitsuba_render_count() - count0
     )

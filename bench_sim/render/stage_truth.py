@@ -43,6 +43,7 @@ __all__ = [
     "RowFootprints",
     "row_footprints",
     "stage_reflectance",
+    "reflectance_rows",
     "StageSums",
     "stage_dark_offset_dn",
     "stage_mean_dn",
@@ -147,8 +148,17 @@ def row_footprints(cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, rows: 
     return RowFootprints(y_base, tuple(y_weights), x_group, tuple(mats))
 
 
+def reflectance_rows(fp: RowFootprints, q: int, stage: int, line0: int, line1: int) -> tuple[int, int]:
+    """Texture grid rows ``(r0, r1)`` that :func:`stage_reflectance` reads for stage ``m`` and
+    lines ``line0 .. line1 - 1`` (a stage reads the rows of every lower stage too)."""
+    m = int(stage)
+    starts = [int(fp.y_base[i]) + i * q for i in range(m)]
+    ends = [st + fp.y_weights[i].size for i, st in enumerate(starts)]
+    return int(line0) * q + min(starts), (int(line1) - 1) * q + max(ends)
+
+
 def stage_reflectance(
-    values: np.ndarray, q: int, fp: RowFootprints, stage: int, line0: int, line1: int
+    values: np.ndarray, q: int, fp: RowFootprints, stage: int, line0: int, line1: int, row0: int = 0
 ) -> np.ndarray:
     """Reflectance integrated by stage-``m`` pixels of scene lines ``line0 .. line1 - 1``.
 
@@ -159,13 +169,16 @@ def stage_reflectance(
     Parameters
     ----------
     values
-        (ny, nx) reflectance of the run's texture grid (:attr:`RunTexture.values`).
+        Reflectance of the run's texture grid rows ``row0 ..`` (:meth:`RunTexture.rows`; the
+        rows :func:`reflectance_rows` names suffice), shape (rows, nx).
     q
         Texels per line period along the track.
     fp
         :func:`row_footprints` of at least ``stage`` rows.
     stage, line0, line1
         ``m`` and the band of output lines.
+    row0
+        Grid row of ``values[0]``.
 
     Returns
     -------
@@ -188,7 +201,7 @@ def stage_reflectance(
         kern = np.zeros(max(o + fp.y_weights[i].size for o, i in zip(offs, rows, strict=True)) - lo)
         for o, i in zip(offs, rows, strict=True):
             kern[o - lo : o - lo + fp.y_weights[i].size] += fp.y_weights[i]
-        start0 = int(line0) * q + lo
+        start0 = int(line0) * q + lo - int(row0)
         if start0 < 0 or start0 + (nl - 1) * q + kern.size > ny:
             raise BenchSimError("stage truth: requested lines fall outside the run texture")
         band = np.zeros((nl, values.shape[1]), dtype=np.float64)

@@ -17,47 +17,125 @@ Plugin
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from bench_sim.config import BenchConfig
+from bench_sim.parallel import parallel_map, thread_count
 from bench_sim.rig.geometry import RigGeometry
-from bench_sim.rig.target import TargetPanel, make_panel, rasterize
+from bench_sim.rig.target import TargetPanel, make_panel, rasterize_at
 
 __all__ = ["RunTexture", "run_texture", "drum_texture", "smear_filter", "ground_truth_reflectance"]
 
 _MARGIN_PX = 6.0
+#: Texel rows per rasterised block, and blocks a texture keeps (least recently used dropped)
+BLOCK_ROWS = 256
+CACHE_BLOCKS = 12
 
 
-@dataclass(frozen=True)
+class _Blocks:
+    """A texture's cache of rasterised blocks of rows (thread-safe)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.blocks: OrderedDict[int, np.ndarray] = OrderedDict()
+
+
+@dataclass(frozen=True, eq=False)
 class RunTexture:
-    """Reflectance on a motion-aligned grid (see module docstring). ``values`` is (ny, nx)."""
+    """Reflectance on a motion-aligned grid (see module docstring), rasterised on demand.
 
-    values: np.ndarray
+    Grid row ``r`` is the absolute texel row ``a0 + r`` (at ``y = (a0 + r) h_y``); column ``b``
+    sits at ``x = x_start + b h_x``. :meth:`rows` rasterises blocks of :data:`BLOCK_ROWS` rows as
+    they are asked for and keeps the last :data:`CACHE_BLOCKS`, so a pass that walks along the
+    grid holds a few blocks whatever its length; :attr:`values` rasterises the whole grid (the
+    reference engine's Mitsuba texture needs it).
+    """
+
     y_start_m: float
     h_y_m: float
     x_start_m: float
     h_x_m: float
     q: int
     panel: TargetPanel
+    n_rows: int
+    n_cols: int
+    #: panel coordinate [object pixels] of column 0, and of one texel along / across the track
+    v0_px: float
+    hu_px: float
+    hv_px: float
+    _blocks: _Blocks = field(default_factory=_Blocks, repr=False)
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.values.shape  # type: ignore[return-value]
+        return (self.n_rows, self.n_cols)
 
     @property
     def a0(self) -> int:
         """Absolute index of the grid's first texel row (texel row ``A`` sits at ``y = A h_y``)."""
         return round(self.y_start_m / self.h_y_m)
 
+    def _rasterize(self, r0: int, r1: int) -> np.ndarray:
+        u = (self.a0 + np.arange(r0, r1)) * self.hu_px
+        v = self.v0_px + np.arange(self.n_cols) * self.hv_px
+        # columns in bands on the pool: each texel depends on its own centre only
+        bands = np.array_split(np.arange(self.n_cols), max(1, min(thread_count(), 8)))
+        parts = parallel_map(
+            lambda cols: rasterize_at(self.panel, u, self.hu_px, v[cols], self.hv_px),
+            [b for b in bands if b.size],
+        )
+        return np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
+
+    def _block(self, b: int) -> np.ndarray:
+        blocks = self._blocks.blocks
+        got = blocks.get(b)
+        if got is None:
+            got = self._rasterize(b * BLOCK_ROWS, min((b + 1) * BLOCK_ROWS, self.n_rows))
+            blocks[b] = got
+            while len(blocks) > CACHE_BLOCKS:
+                blocks.popitem(last=False)
+        else:
+            blocks.move_to_end(b)
+        return got
+
+    def rows(self, r0: int, r1: int) -> np.ndarray:
+        """Reflectance of grid rows ``r0 .. r1 - 1``, shape (r1 - r0, nx), float32 (a new array)."""
+        if not 0 <= r0 <= r1 <= self.n_rows:
+            raise ValueError(f"rows {r0}..{r1} outside the run texture's 0..{self.n_rows}")
+        if "values" in self.__dict__:
+            return self.values[r0:r1].copy()
+        out = np.empty((r1 - r0, self.n_cols), dtype=np.float32)
+        with self._blocks.lock:
+            for b in range(r0 // BLOCK_ROWS, -(-r1 // BLOCK_ROWS)):
+                lo, hi = max(r0, b * BLOCK_ROWS), min(r1, (b + 1) * BLOCK_ROWS)
+                if hi > lo:
+                    out[lo - r0 : hi - r0] = self._block(b)[lo - b * BLOCK_ROWS : hi - b * BLOCK_ROWS]
+        return out
+
+    @property
+    def held_bytes(self) -> int:
+        """Bytes of rasterised texels the texture holds now (its blocks, or the whole grid)."""
+        if "values" in self.__dict__:
+            return int(self.values.nbytes)
+        with self._blocks.lock:
+            return int(sum(b.nbytes for b in self._blocks.blocks.values()))
+
+    @functools.cached_property
+    def values(self) -> np.ndarray:
+        """The whole grid, (ny, nx) float32 (rasterised once, then kept)."""
+        return self._rasterize(0, self.n_rows)
+
 
 def run_texture(
     cfg: BenchConfig, geom: RigGeometry, first_frame: int, frames: int, rng: np.random.Generator | None = None
 ) -> RunTexture:
-    """Rasterise the target for frames ``first_frame .. first_frame + frames - 1`` (``rng``: the
-    run's generator, for generated targets)."""
+    """The target grid for frames ``first_frame .. first_frame + frames - 1`` (``rng``: the
+    run's generator, for generated targets). Nothing is rasterised yet (see :class:`RunTexture`)."""
     p = geom.object_pixel_m
     q = cfg.target.texels_per_pixel
     h_y = geom.delta_m / q
@@ -76,16 +154,10 @@ def run_texture(
     circumference_px = 2 * np.pi * geom.radius_m / p
     panel = make_panel(cfg.target, circumference_px, rng)
     # panel coordinates: u = y / p (lines), v = x / p + columns / 2
-    vals = rasterize(
-        panel,
-        u0_px=a0 * h_y / p,
-        nu=ny,
-        hu_px=h_y / p,
-        v0_px=x_start / p + cfg.target.panel_columns / 2.0,
-        nv=nx,
-        hv_px=h_x / p,
+    return RunTexture(
+        a0 * h_y, h_y, x_start, h_x, q, panel, ny, nx,
+        v0_px=x_start / p + cfg.target.panel_columns / 2.0, hu_px=h_y / p, hv_px=h_x / p,
     )
-    return RunTexture(vals, a0 * h_y, h_y, x_start, h_x, q, panel)
 
 
 def smear_filter(values: np.ndarray, h_y_m: float, smear_m: float) -> np.ndarray:

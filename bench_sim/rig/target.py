@@ -28,7 +28,7 @@ import numpy as np
 
 from bench_sim.config import TargetConfig
 
-__all__ = ["Patch", "TargetPanel", "make_panel", "rasterize", "BAR_PERIODS_PX"]
+__all__ = ["Patch", "TargetPanel", "make_panel", "rasterize", "rasterize_at", "BAR_PERIODS_PX"]
 
 BAR_PERIODS_PX: tuple[int, ...] = (2, 3, 4, 6, 8, 12, 16)
 _TEXT = "BENCH_SIM DTDI-HDR 0123456789 push-broom"
@@ -106,9 +106,13 @@ class TargetPanel:
                 iv = np.nonzero((vv >= v0) & (vv < v1))[0]
                 if iu.size == 0 or iv.size == 0:
                     continue
-                uu = np.broadcast_to(u[iu][:, None], (iu.size, iv.size))
-                vb = np.broadcast_to(vv[iv][None, :], (iu.size, iv.size))
-                out[np.ix_(iu, iv)] = paint(uu, vb).reshape(iu.size, iv.size)
+                # the painters broadcast: what depends on u alone is computed once per row
+                value = np.broadcast_to(paint(u[iu][:, None], vv[iv][None, :]), (iu.size, iv.size))
+                ru, rv = _run(iu), _run(iv)
+                if isinstance(ru, slice) or isinstance(rv, slice):
+                    out[ru, rv] = value
+                else:
+                    out[np.ix_(iu, iv)] = value
         return out
 
     def element_box(self, name: str, half: str) -> tuple[float, float, float, float]:
@@ -203,6 +207,13 @@ def _layout(c: TargetConfig) -> dict[str, tuple[float, float, float, float]]:
     }
 
 
+def _run(idx: np.ndarray) -> slice | np.ndarray:
+    """A slice for a run of consecutive indices (fast assignment), else the indices."""
+    if idx[-1] - idx[0] + 1 == idx.size:
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
+
+
 def _inside(u, v, box):
     u0, u1, v0, v1 = box
     return (u >= u0) & (u < u1) & (v >= v0) & (v < v1)
@@ -288,11 +299,21 @@ def rasterize(
     numpy.ndarray
         Reflectance, shape (nu, nv), float32.
     """
+    return rasterize_at(
+        panel, u0_px + np.arange(nu) * hu_px, hu_px, v0_px + np.arange(nv) * hv_px, hv_px, supersample
+    )
+
+
+def rasterize_at(
+    panel: TargetPanel, u_px: np.ndarray, hu_px: float, v_px: np.ndarray, hv_px: float, supersample: int = 2
+) -> np.ndarray:
+    """:func:`rasterize` on the texel centres ``u_px[:, None] x v_px[None, :]`` (1-D arrays,
+    panel pixels) of texels ``hu_px x hv_px``. Each texel depends on its own centre only, so any
+    split of a grid into pieces gives the same values. Shape (len(u), len(v)), float32."""
     s = max(int(supersample), 1)
     offs = (np.arange(s) + 0.5) / s - 0.5
-    acc = np.zeros((nu, nv), dtype=np.float64)
-    ua = u0_px + np.arange(nu) * hu_px
-    va = v0_px + np.arange(nv) * hv_px
+    ua, va = np.asarray(u_px, dtype=np.float64), np.asarray(v_px, dtype=np.float64)
+    acc = np.zeros((ua.size, va.size), dtype=np.float64)
     for ou in offs:
         for ov in offs:
             acc += panel.reflectance_grid(ua + ou * hu_px, va + ov * hv_px)

@@ -71,6 +71,7 @@ __all__ = [
     "slanted_edges",
     "random_bars",
     "panel_map",
+    "area_resize",
 ]
 
 #: ``target.layout`` values whose reflectance is a panel map from this module
@@ -213,7 +214,7 @@ def check_target_image(cfg: TargetConfig) -> None:
         read_target_image(cfg)
 
 
-def _area_resize(img: np.ndarray, rows: int, cols: int) -> np.ndarray:
+def area_resize(img: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """Area-averaging resample (OpenCV INTER_AREA: exact box averages when shrinking)."""
     import cv2
 
@@ -230,11 +231,11 @@ def fit_to_panel(img: np.ndarray, fit: str, panel_lines: int, panel_columns: int
     rows, cols = panel_lines * q, panel_columns * q
     h, w = img.shape
     if fit == "stretch":
-        return _area_resize(img, rows, cols)
+        return area_resize(img, rows, cols)
     if fit == "crop":
         scale = max(rows / h, cols / w)
         sh, sw = max(round(h * scale), rows), max(round(w * scale), cols)
-        big = _area_resize(img, sh, sw)
+        big = area_resize(img, sh, sw)
         r0, c0 = (sh - rows) // 2, (sw - cols) // 2
         return big[r0 : r0 + rows, c0 : c0 + cols]
     if fit == "tile":

@@ -254,13 +254,18 @@ class DTDIAccumulator:
         return complete_lines(self.frames_seen, stage)
 
     def _add(self, frame: np.ndarray) -> None:
-        """Add row ``i`` of frame ``k`` to the partial sum of line ``k - i`` (ring slot mod R)."""
+        """Add row ``i`` of frame ``k`` to the partial sum of line ``k - i``, kept in ring slot
+        ``(i - k) mod R`` (:meth:`_slot`): the rows land on increasing slots, two contiguous runs."""
         r_rows = self.ring_rows
-        r = self.frames_seen % r_rows
-        # slots r, r-1, ..., 0 take rows 0..r; slots R-1, ..., r+1 take rows r+1..R-1
-        self._ring[r::-1] += frame[: r + 1]
-        if r + 1 < r_rows:
-            self._ring[r_rows - 1 : r : -1] += frame[r + 1 : r_rows]
+        r = (-self.frames_seen) % r_rows
+        # rows 0 .. R-r-1 -> slots r .. R-1; rows R-r .. R-1 -> slots 0 .. r-1
+        self._ring[r:] += frame[: r_rows - r]
+        if r:
+            self._ring[:r] += frame[r_rows - r : r_rows]
+
+    def _slot(self, line: int | np.ndarray) -> int | np.ndarray:
+        """Ring slot of the partial sum of scene line ``line``."""
+        return (-line) % self.ring_rows
 
     def push(self, frame_dn: np.ndarray) -> dict[int, np.ndarray]:
         """Add one (M, N) frame of raw pixel values [DN].
@@ -282,13 +287,13 @@ class DTDIAccumulator:
         for m in self.stages:
             j = k - m + 1
             if j >= 0:
-                slot = j % self.ring_rows
+                slot = self._slot(j)
                 out[m] = _finish(
                     self._ring[slot], m, self.beta_bits, self.black_offset_dn, self.subtract_black,
                     self.pedestal_dn[m],
                 )
         # the line that just left the last used row (partial lines j < 0 included): free its slot
-        self._ring[(k - self.ring_rows + 1) % self.ring_rows] = 0.0
+        self._ring[self._slot(k - self.ring_rows + 1)] = 0.0
         self.frames_seen = k + 1
         return out
 
@@ -303,14 +308,35 @@ class DTDIAccumulator:
             chunk = chunk[None]
         if chunk.ndim != 3:
             raise BenchSimError(f"frames shape {chunk.shape}: expected (frames, rows, columns)")
-        got: dict[int, list[np.ndarray]] = {m: [] for m in self.stages}
-        for f in chunk:
-            for m, line in self.push(f).items():
-                got[m].append(line)
-        return {
-            m: (np.stack(v) if v else np.zeros((0, self.n_columns), dtype=np.uint32))
-            for m, v in got.items()
-        }
+        n_frames = chunk.shape[0]
+        if n_frames and (chunk.shape[2] != self.n_columns or chunk.shape[1] < self.ring_rows):
+            raise BenchSimError(
+                f"frame shape {chunk.shape[1:]}: expected (rows >= {self.ring_rows}, {self.n_columns})"
+            )
+        st = np.asarray(self.stages)
+        k0 = self.frames_seen
+        # raw sums of the line each stage completes in each frame, finished per stage at the end
+        sums = np.empty((st.size, n_frames, self.n_columns), dtype=np.float64)
+        r_rows = self.ring_rows
+        for t in range(n_frames):
+            self._add(chunk[t])
+            k = k0 + t
+            j = k - st + 1
+            if j[0] >= 0:  # stages ascend: every stage completed a line
+                sums[:, t] = self._ring[self._slot(j)]
+            else:
+                ok = j >= 0
+                sums[ok, t] = self._ring[self._slot(j[ok])]
+            self._ring[self._slot(k - r_rows + 1)] = 0.0
+            self.frames_seen = k + 1
+        out = {}
+        for s_i, m in enumerate(self.stages):
+            first = max(m - 1 - k0, 0)  # frames of the chunk before stage m's first line
+            out[m] = _finish(
+                sums[s_i, first:], m, self.beta_bits, self.black_offset_dn, self.subtract_black,
+                self.pedestal_dn[m],
+            ) if first < n_frames else np.zeros((0, self.n_columns), dtype=np.uint32)
+        return out
 
 
 def _iter_chunks(frames: np.ndarray | Iterable[np.ndarray]) -> Iterator[np.ndarray]:

@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     from bench_sim.config import BenchConfig, DTDIConfig, SensorConfig
 
 __all__ = [
+    "word_dtype",
     "QUANTIZATION_VAR_DN2",
     "check_beta_bits",
     "full_scale_dn",
@@ -86,6 +87,12 @@ def full_scale_dn(beta_bits: int, name: str = "beta_bits") -> int:
 def word_clip_dn(beta_bits: int, name: str = "beta_bits") -> int:
     """Largest value a ``beta``-bit stage word stores: ``2**beta - 1`` [DN]."""
     return full_scale_dn(beta_bits, name) - 1
+
+
+def word_dtype(beta_bits: int) -> np.dtype:
+    """The smallest unsigned integer type that holds a ``beta``-bit stage word: ``uint16`` up to
+    16 bits, else ``uint32``."""
+    return np.dtype(np.uint16 if check_beta_bits(beta_bits) <= 16 else np.uint32)
 
 
 def pixel_saturation_dn(sensor: SensorConfig) -> int:

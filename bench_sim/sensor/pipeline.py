@@ -5,39 +5,53 @@ uniform field for the photon-transfer measurement) go through the EMVA 1288 pixe
 (:func:`bench_sim.sensor.emva.expose`) in chunks of frames and straight into the streaming
 :class:`bench_sim.sensor.dtdi.DTDIAccumulator`; only the output stage images grow with the
 number of lines.
+
+Chunks of :data:`DEFAULT_CHUNK_FRAMES` frames are exposed on the thread pool
+(:mod:`bench_sim.parallel`, ``BENCH_SIM_THREADS``), chunk ``c`` with its own generator
+``chunk_generator(noise, c)`` spawned from one ``SeedSequence`` (``noise``) drawn from the run's
+generator, and accumulated in frame order: the stage images are the same for any number of
+threads.
 """
 
 from __future__ import annotations
 
+import itertools
+import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from bench_sim.config import DTDIConfig, SensorConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.parallel import chunk_generator, ordered_imap, seed_sequence
 from bench_sim.sensor.dtdi import DTDIAccumulator, collect_stage_lines, validate_stages
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, expose
 
-__all__ = ["sensor_dtdi_pass", "iter_sensor_dtdi", "DEFAULT_CHUNK_FRAMES"]
+__all__ = ["sensor_dtdi_pass", "iter_sensor_dtdi", "iter_exposed", "Exposed", "DEFAULT_CHUNK_FRAMES"]
 
-#: Frames exposed per vectorised call. The temporal noise drawn depends on this chunking (the
-#: frames are re-chunked to it whatever the input's own chunking), so keep it fixed for
-#: reproducible runs.
+#: Frames exposed per vectorised call, each chunk with its own random stream. The temporal noise
+#: drawn depends on this chunking (the frames are re-chunked to it whatever the input's own
+#: chunking), so keep it fixed for reproducible runs.
 DEFAULT_CHUNK_FRAMES = 16
 
 
+def _as_float(arr: np.ndarray) -> np.ndarray:
+    return arr if arr.dtype in (np.float32, np.float64) else arr.astype(np.float64)
+
+
 def _rechunk(frames: np.ndarray | Iterable[np.ndarray], size: int) -> Iterator[np.ndarray]:
-    """Yield (C, M, N) float64 chunks of exactly ``size`` frames (the last may be shorter)."""
+    """Yield (C, M, N) float chunks of exactly ``size`` frames (the last may be shorter)."""
     if isinstance(frames, np.ndarray):
         if frames.ndim != 3:
             raise BenchSimError(f"photons shape {frames.shape}: expected (frames, rows, columns)")
         for start in range(0, frames.shape[0], size):
-            yield np.asarray(frames[start : start + size], dtype=np.float64)
+            yield _as_float(np.asarray(frames[start : start + size]))
         return
     buf: list[np.ndarray] = []
     n = 0
     for item in frames:
-        arr = np.asarray(item, dtype=np.float64)
+        arr = _as_float(np.asarray(item))
         if arr.ndim == 2:
             arr = arr[None]
         if arr.ndim != 3:
@@ -54,13 +68,48 @@ def _rechunk(frames: np.ndarray | Iterable[np.ndarray], size: int) -> Iterator[n
         yield np.concatenate(buf) if len(buf) > 1 else buf[0]
 
 
+@dataclass(frozen=True)
+class Exposed:
+    """One exposed chunk: its photons, raw pixel values [DN], the saturated reads (or None)
+    and the seconds its exposure took (in its pool thread)."""
+
+    photons: np.ndarray
+    dn: np.ndarray
+    saturated: np.ndarray | None
+    seconds: float
+
+
+def iter_exposed(
+    chunks: Iterable[np.ndarray],
+    sensor: SensorConfig,
+    fixed: FixedPattern,
+    t_int_s: float,
+    noise: np.random.SeedSequence,
+    *,
+    saturated: bool = False,
+) -> Iterator[Exposed]:
+    """Expose chunks of frames on the thread pool (:func:`bench_sim.parallel.ordered_imap`),
+    chunk ``c`` drawing from :func:`bench_sim.parallel.chunk_generator` ``(noise, c)``; yields
+    them in order, a few chunks exposed ahead of the consumer. ``saturated``: also return the
+    saturated reads (see :func:`bench_sim.sensor.emva.expose`)."""
+
+    def one(item: tuple[int, np.ndarray]) -> Exposed:
+        c, ph = item
+        t0 = time.perf_counter()
+        sat = np.empty(ph.shape, dtype=bool) if saturated else None
+        raw = expose(ph, sensor, fixed, t_int_s, chunk_generator(noise, c), saturated=sat)
+        return Exposed(ph, raw, sat, time.perf_counter() - t0)
+
+    return ordered_imap(one, enumerate(chunks))
+
+
 def iter_sensor_dtdi(
     photons: np.ndarray | Iterable[np.ndarray],
     sensor: SensorConfig,
     dtdi: DTDIConfig,
     t_int_s: float,
     stages: Sequence[int],
-    rng: np.random.Generator,
+    rng: np.random.Generator | np.random.SeedSequence | int,
     *,
     fixed: FixedPattern | None = None,
     pedestal_dn: float | Mapping[int, float] | None = None,
@@ -81,27 +130,28 @@ def iter_sensor_dtdi(
     if chunk_frames < 1:
         raise BenchSimError(f"chunk_frames = {chunk_frames!r}: must be >= 1")
     st = validate_stages(stages)
+    gen = np.random.default_rng(rng)
     if fixed is None:
-        fixed = draw_fixed_pattern(sensor, rng)
-    acc: DTDIAccumulator | None = None
-    fp = fixed
-    for chunk in _rechunk(photons, chunk_frames):
-        if acc is None:
-            rows, cols = chunk.shape[1:]
-            if rows > fixed.shape[0] or cols > fixed.shape[1]:
-                raise BenchSimError(
-                    f"photon frames of {rows} x {cols} pixels exceed the sensor's "
-                    f"{fixed.shape[0]} x {fixed.shape[1]}"
-                )
-            validate_stages(st, rows)
-            fp = fixed if (rows, cols) == fixed.shape else fixed.window(rows, cols)
-            acc = DTDIAccumulator(
-                cols, st, dtdi.beta_bits, sensor.black_offset_dn, dtdi.subtract_black,
-                pedestal_dn=dtdi.pedestal_dn if pedestal_dn is None else pedestal_dn,
-            )
-        yield acc.push_many(expose(chunk, sensor, fp, t_int_s, rng))
-    if acc is None:
+        fixed = draw_fixed_pattern(sensor, gen)
+    noise = seed_sequence(gen)
+    chunks = _rechunk(photons, chunk_frames)
+    first = next(chunks, None)
+    if first is None:
         raise BenchSimError("photons: the pass has no frames")
+    rows, cols = first.shape[1:]
+    if rows > fixed.shape[0] or cols > fixed.shape[1]:
+        raise BenchSimError(
+            f"photon frames of {rows} x {cols} pixels exceed the sensor's "
+            f"{fixed.shape[0]} x {fixed.shape[1]}"
+        )
+    validate_stages(st, rows)
+    fp = fixed if (rows, cols) == fixed.shape else fixed.window(rows, cols)
+    acc = DTDIAccumulator(
+        cols, st, dtdi.beta_bits, sensor.black_offset_dn, dtdi.subtract_black,
+        pedestal_dn=dtdi.pedestal_dn if pedestal_dn is None else pedestal_dn,
+    )
+    for got in iter_exposed(itertools.chain([first], chunks), sensor, fp, t_int_s, noise):
+        yield acc.push_many(got.dn)
 
 
 def sensor_dtdi_pass(
@@ -110,7 +160,7 @@ def sensor_dtdi_pass(
     dtdi: DTDIConfig,
     t_int_s: float,
     stages: Sequence[int],
-    rng: np.random.Generator,
+    rng: np.random.Generator | np.random.SeedSequence | int,
     *,
     fixed: FixedPattern | None = None,
     lines: int | None = None,
@@ -133,8 +183,10 @@ def sensor_dtdi_pass(
     stages
         Requested stages, each in ``1 .. R``.
     rng
-        The run's random generator. If ``fixed`` is None the fixed pattern is drawn from it
-        first (:func:`draw_fixed_pattern` for the whole sensor), then the temporal noise.
+        The run's random generator (or a seed for one). If ``fixed`` is None the fixed pattern
+        is drawn from it first (:func:`draw_fixed_pattern` for the whole sensor); then one
+        ``SeedSequence`` of the temporal noise (:func:`bench_sim.parallel.seed_sequence`), from
+        which chunk ``c`` of ``chunk_frames`` frames gets its own generator.
     fixed
         The sensor's fixed pattern (whole sensor or exactly ``R x C``).
     lines
