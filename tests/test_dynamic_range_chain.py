@@ -47,6 +47,10 @@ def test_word_limited_gain_over_gamma2_is_eq15_by_construction(dr12: ChainDR) ->
     # scatter: over 30 seeds the gain's standard deviation is 0.25 - 0.36 dB (before / after the
     # sensor pass drew its noise per chunk of frames), so 0.75 dB is 2 - 3 sigma
     assert abs(dr12.gain_over_gamma2_db - dr_increase_eq15_db(MU1, MU2)) <= 0.75
+    # where the linear response meets the plateau (no variance scatter) the two saturation
+    # points are exactly mu2/mu1 apart: the construction itself, to a few thousandths of a dB
+    ext = dr12.images["hdr"].dr_db_extrapolated - dr12.images["gamma2"].dr_db_extrapolated
+    assert abs(ext - dr_increase_eq15_db(MU1, MU2)) <= 0.02
     img = dr12.images
     assert img["hdr"].photons_min == pytest.approx(img["gamma2"].photons_min)
     assert img["hdr"].photons_sat == pytest.approx(img["gamma1"].photons_sat, rel=0.02)

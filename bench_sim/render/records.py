@@ -5,11 +5,13 @@ The fast engine (:class:`bench_sim.render.engines.FastEngine`) needs, for every 
 for every light ``l`` alone, the radiance ``S0_l`` the record sees from everything that is not
 the drum's print and the radiance per unit albedo ``D_l`` the print sends it. Mitsuba renders:
 
-1. the hit positions: an ``aov`` render (no light needed);
-2. per light, the scene under that light alone (:func:`bench_sim.rig.scene.scene_dict` with
+1. per light, the scene under that light alone (:func:`bench_sim.rig.scene.scene_dict` with
    ``lights=[name]``) on a drum of albedo 1 -- and, for the trimesh drum, of albedo 0 (``S0``);
    on the analytic cylinder a record either hit the drum or saw the light directly, so ``S0``
-   is the radiance of the records that missed it.
+   is the radiance of the records that missed it. A fill light on the analytic drum (mono)
+   needs no render: its records are the fill's radiance in closed form
+   (:func:`_fill_in_closed_form`);
+2. the hit positions: an ``aov`` render (no light needed).
 
 All renders use the same film, samples per pixel and sampler seed (:data:`RECORD_SEED`), so they
 trace the same camera rays: positions and radiances belong to the same samples.
@@ -43,7 +45,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, config_to_toml_dict, with_overrides
 from bench_sim.rig.geometry import RigGeometry
-from bench_sim.rig.scene import light_names, scene_dict
+from bench_sim.rig.scene import fill_radiance_w_m2_sr, light_names, scene_dict
 
 __all__ = [
     "LightRecords",
@@ -173,6 +175,17 @@ class LightRecords:
     derived: dict[Any, Any] = field(default_factory=dict)
 
 
+def _fill_in_closed_form(cfg: BenchConfig, name: str) -> bool:
+    """A fill light (uniform environment of radiance ``L``) on the analytic drum, rendered mono:
+    the drum is convex and the only shape, so every point of it sees the whole sky above its
+    tangent plane and sends ``rho L`` to the camera (a record per unit albedo: ``L``), and a
+    record that misses it sees ``L``: the records are ``L`` everywhere, exactly what Mitsuba's
+    cosine-weighted BSDF sampling gives sample by sample, without a render."""
+    return (
+        cfg.drum.geometry == "analytic" and not cfg.render.spectral and cfg.lights.get(name).kind == "fill"
+    )
+
+
 def _render_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, key: str) -> LightRecords:
     ref = reference_config(cfg)
     M, N, ss = cfg.sensor.rows, cfg.sensor.columns, cfg.render.subpixels
@@ -185,16 +198,20 @@ def _render_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, key: str) -> L
             spp=spp, aov_position=aov, spectral=spectral, lights=lights,
         )
 
+    names = light_names(ref)
     # hit positions alone: the aov integrator without an inner one traces the camera rays only
+    # (cheaper than an aov output of a light's render: measured 0.8 + 1.0 s against 2.6 s)
     d = scene(1.0, [], True)
     d["integrator"] = {"type": "aov", "aovs": "pos:position"}
     position = render_array(mi, mi.load_dict(d), spp, RECORD_SEED)[..., -3:]
     hit = ~np.all(position == 0.0, axis=-1)
-    names = light_names(ref)
     d_rec = np.empty((len(names), M * ss, N * ss), dtype=np.float32)
     static = np.empty((len(names), M, N), dtype=np.float32)
     for li, name in enumerate(names):
-        lit = render_array(mi, mi.load_dict(scene(1.0, [name], False)), spp, RECORD_SEED)[..., 0]
+        if _fill_in_closed_form(ref, name):
+            lit = np.full((M * ss, N * ss), fill_radiance_w_m2_sr(ref, name), dtype=np.float32)
+        else:
+            lit = render_array(mi, mi.load_dict(scene(1.0, [name], False)), spp, RECORD_SEED)[..., 0]
         if cfg.drum.geometry == "analytic":
             # the drum is the only shape: a record either hit it (no light without its albedo)
             # or missed everything (sees the light directly, independent of the albedo)
