@@ -16,9 +16,9 @@ the free space of the file system that receives the output (:func:`bench_sim.io.
 the temporary folder of an output set lies beside it, so the new set must fit next to the old
 one).
 
-Other commands (sweeps, data sets) build an estimate from :func:`pass_memory` per task times the
-tasks that run at once, and :func:`output_disk` terms times the tasks written, then call
-:func:`check_resources`.
+Commands that run many tasks (sweeps, data sets) use :func:`estimate_tasks`: the largest task's
+memory (one simulation pass with its truth, :func:`estimate_simulate`) times the tasks that run
+at once on this machine, and their outputs' disk terms, then call :func:`check_resources`.
 """
 
 from __future__ import annotations
@@ -49,6 +49,8 @@ __all__ = [
     "estimate_reproduce",
     "estimate_ptc",
     "estimate_fuse",
+    "estimate_tasks",
+    "local_concurrency",
     "BASE_PROCESS_BYTES",
     "BASE_MITSUBA_BYTES",
 ]
@@ -359,3 +361,33 @@ def estimate_fuse(shape: tuple[int, ...], tra: bool) -> ResourceEstimate:
     if tra:
         disk["Gamma_TRA PNG"] = px
     return ResourceEstimate("fuse", mem, disk, f"use smaller images than {tuple(shape)}")
+
+
+def local_concurrency(workers: int | None, scheduler: str | None) -> int:
+    """Tasks that run at once on this machine: ``workers`` local worker processes (default:
+    the usable cores; ``0``: in this process, one at a time), or ``0`` with a scheduler (the
+    tasks run on the cluster's machines, whose memory this machine cannot see)."""
+    if scheduler is not None:
+        return 0
+    if workers is None:
+        from bench_sim.experiments.execution import default_workers
+
+        return default_workers()
+    return max(int(workers), 1)
+
+
+def estimate_tasks(
+    command: str,
+    task: ResourceEstimate,
+    concurrent: int,
+    disk_bytes: Mapping[str, int],
+    hint: str,
+) -> ResourceEstimate:
+    """A run of many tasks (a sweep's points, a data set's samples): ``concurrent`` worker
+    processes on this machine each hold the largest task's memory (``task``, e.g.
+    :func:`estimate_simulate` of it; ``concurrent = 0``: none here, the tasks run on a cluster),
+    plus this process, which gathers the results; ``disk_bytes``: the run's outputs."""
+    mem: dict[str, int] = {"this process (client, results)": BASE_PROCESS_BYTES}
+    if concurrent > 0:
+        mem[f"{concurrent} worker process(es) x one {task.command} task"] = concurrent * task.memory_total
+    return ResourceEstimate(command, mem, dict(disk_bytes), hint)

@@ -265,7 +265,25 @@ def _inputs(folder: Path, extra: str = "") -> Path:
     cfg = _cfg(folder, extra)
     np.save(folder / "low.npy", np.full((4, 5), 100, dtype=np.uint16))
     np.save(folder / "high.npy", np.full((4, 5), 800, dtype=np.uint16))
+    # a sweep and a dataset of the tiny bench (two points / two samples, in this process)
+    (folder / "sweep.toml").write_text(
+        f"base = '{cfg.name}'\nseed = 1\n[[parameters]]\nkey = 'lights.strong.irradiance_w_m2'\n"
+        "values = [64.0, 128.0]\n"
+    )
+    (folder / "dataset.toml").write_text(
+        f"base = '{cfg.name}'\nsamples = 2\nseed = 1\nstages = [2, 8]\nlines = 8\ncolumns = 48\n"
+        "[randomize]\n'lights.weak.irradiance_w_m2' = { dist = 'uniform', low = 2.0, high = 12.0 }\n"
+    )
     return cfg
+
+
+def _command_args(command: str, folder: Path, cfg: Path) -> list[str]:
+    """The command line of ``command`` on the tiny inputs of :func:`_inputs`, into ``out``."""
+    if command == "fuse":
+        return ["fuse", str(folder / "low.npy"), str(folder / "high.npy"), "--out", str(folder / "o.exr")]
+    if command in ("sweep", "dataset"):
+        return [command, str(folder / f"{command}.toml"), "--out", str(folder / "out"), "--workers", "0"]
+    return [command, str(cfg), *STAGES.get(command, []), "--out", str(folder / "out")]
 
 
 @pytest.mark.parametrize(("args", "needles"), [c[1:] for c in BAD_ARGS], ids=[c[0] for c in BAD_ARGS])
@@ -381,7 +399,7 @@ def test_runs_that_cannot_fit_are_refused_up_front(
     assert_refused(r, tmp_path, before, *needles)
 
 
-@pytest.mark.parametrize("command", ["render", "simulate", "ptc", "reproduce", "fuse"])
+@pytest.mark.parametrize("command", ["render", "simulate", "ptc", "reproduce", "fuse", "sweep", "dataset"])
 @pytest.mark.parametrize("kind", ["memory", "disk"])
 def test_every_command_checks_memory_and_disk(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: str, kind: str
@@ -393,10 +411,7 @@ def test_every_command_checks_memory_and_disk(
     else:
         full = shutil.disk_usage(tmp_path)._replace(free=0)  # a full disk
         monkeypatch.setattr(shutil, "disk_usage", lambda path: full)
-    args = [command, str(cfg), *STAGES.get(command, []), "--out", str(tmp_path / "out")]
-    if command == "fuse":
-        images = [str(tmp_path / n) for n in ("low.npy", "high.npy")]
-        args = ["fuse", *images, "--out", str(tmp_path / "o.exr")]
+    args = _command_args(command, tmp_path, cfg)
     before = _files(tmp_path)
     r = runner.invoke(app, args)
     if kind == "memory":
@@ -477,7 +492,7 @@ ENVIRONMENTS: list[tuple[str, dict[str, str], str, Any, list[str]]] = [
 ]
 
 
-@pytest.mark.parametrize("command", ["render", "simulate"])
+@pytest.mark.parametrize("command", ["render", "simulate", "sweep", "dataset"])
 @pytest.mark.parametrize(
     ("env", "extra", "setup", "needles"), [c[1:] for c in ENVIRONMENTS], ids=[c[0] for c in ENVIRONMENTS]
 )
@@ -491,7 +506,7 @@ def test_forced_variants_that_cannot_run(
     if setup is not None:
         setup(monkeypatch)
     before = _files(tmp_path)
-    r = runner.invoke(app, [command, str(cfg), *STAGES.get(command, []), "--out", str(tmp_path / "out")])
+    r = runner.invoke(app, _command_args(command, tmp_path, cfg))
     assert_refused(r, tmp_path, before, *needles)
 
 

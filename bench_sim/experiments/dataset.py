@@ -513,6 +513,7 @@ def run_dataset(
     from bench_sim.experiments.dataset_card import write_card
     from bench_sim.experiments.dataset_spec import check_sample_configs, load_spec, sample_streams
     from bench_sim.experiments.execution import open_client, run_tasks
+    from bench_sim.experiments.preflight import preflight_tasks
     from bench_sim.io import check_free_space, format_bytes, write_json
 
     t_start = time.perf_counter()
@@ -537,6 +538,10 @@ def run_dataset(
     )
     values = [spec.draw(i) for i in range(spec.samples)]
     planned = check_sample_configs(spec, {i: values[i] for i in todo})
+    preflight_tasks(  # memory of the samples running at once here, the backend (disk: above)
+        "dataset", [(planned[i], spec.stages) for i in todo], out=out, workers=workers,
+        scheduler=scheduler, disk_bytes={}, hint="lower --workers, lines or columns",
+    )
     run = DatasetRun(out=out, samples=spec.samples)
 
     if action == "create":

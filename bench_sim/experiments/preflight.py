@@ -9,18 +9,20 @@ file reads (``target.layout = "image"``), and the rendering backend chosen or fo
 
 A new command calls :func:`preflight` with its config, its output folder and its
 :class:`~bench_sim.resources.ResourceEstimate`, then computes, then writes inside
-:func:`bench_sim.io.output_set`.
+:func:`bench_sim.io.output_set`. Commands that run many simulation tasks on the execution layer
+(sweeps, data sets) call :func:`preflight_tasks` with every task's config and stages.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from bench_sim.config import BenchConfig
 from bench_sim.resources import ResourceEstimate, check_resources
 
-__all__ = ["preflight", "check_seed", "SEED_MAX"]
+__all__ = ["preflight", "preflight_tasks", "check_seed", "SEED_MAX"]
 
 #: The largest root seed: seeds are stored as signed 64-bit integers (Zarr, NetCDF attributes).
 SEED_MAX = 2**63 - 1
@@ -80,3 +82,34 @@ def preflight(
 
             select_backend(cfg.render.variant, "spectral" if cfg.render.spectral else "mono")
     return out_path
+
+
+def preflight_tasks(
+    command: str,
+    tasks: Iterable[tuple[BenchConfig, Sequence[int]]],
+    *,
+    out: str | os.PathLike[str] | None,
+    workers: int | None,
+    scheduler: str | None,
+    disk_bytes: Mapping[str, int],
+    hint: str,
+) -> None:
+    """Check a run of many simulation passes (sweep points, data-set samples) before any runs.
+
+    The largest task (one pass with its truth, :func:`bench_sim.resources.estimate_simulate`)
+    times the worker processes that run at once on this machine
+    (:func:`bench_sim.resources.local_concurrency`; none with a ``scheduler``: the cluster's
+    machines run them) must fit in the memory available, and ``disk_bytes`` on the disk of
+    ``out``; the target image and the backend (forced or chosen) are checked on the largest
+    task's config (the backend only for local workers). The output folder itself is the
+    caller's to check (resumable runs reuse theirs).
+    """
+    from bench_sim.resources import check_resources, estimate_simulate, estimate_tasks, local_concurrency
+
+    sized = [(estimate_simulate(cfg, stages), cfg) for cfg, stages in tasks]
+    if not sized:
+        return
+    task, cfg = max(sized, key=lambda e: e[0].memory_total)
+    est = estimate_tasks(command, task, local_concurrency(workers, scheduler), disk_bytes, hint)
+    check_resources(est, out)
+    preflight(cfg, out=None, estimate=None, render=scheduler is None)

@@ -453,6 +453,7 @@ def run_sweep(
         Called in this process with each point's record as it is written.
     """
     from bench_sim.experiments.execution import open_client, run_tasks
+    from bench_sim.experiments.preflight import preflight_tasks
     from bench_sim.experiments.sweep_report import write_outputs, write_points_csv
     from bench_sim.io import OUTPUT_MARKER, write_json
 
@@ -464,6 +465,18 @@ def run_sweep(
         raise BenchSimError(f"--workers = {workers}: must be >= 0 (0 runs in this process)")
     plan = plan_sweep(spec_path, out, resume=resume)
     out = plan.out
+    preflight_tasks(
+        "sweep",
+        [(t.cfg, t.stages) for t in plan.todo],
+        out=out,
+        workers=workers,
+        scheduler=scheduler,
+        disk_bytes={
+            f"{len(plan.tasks)} points (journal, points.csv, sweep.nc)": len(plan.tasks) * 16 * 1024,
+            "plots and report": (len(plan.spec.keys) + 2) * 512 * 1024 if plots else 64 * 1024,
+        },
+        hint="lower --workers, lines or sensor.columns",
+    )
     t0 = time.perf_counter()
     todo = plan.todo
     # the cluster is reached (or started) before anything is written: an unreachable scheduler
