@@ -38,7 +38,7 @@ try:  # typer >= 0.22 carries its own copy of click
 except ImportError:  # pragma: no cover - older typer on click
     from click import exceptions as _click_exc  # type: ignore[no-redef]
 
-__all__ = ["app", "main", "parse_stages", "guarded"]
+__all__ = ["app", "main", "guarded"]
 
 PROG = "bench-sim"
 #: exit status of a user error, of Ctrl-C (128 + SIGINT) and of SIGTERM (128 + SIGTERM)
@@ -236,33 +236,6 @@ def _user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
     return func
 
 
-def parse_stages(text: str, max_stage: int | None = None) -> list[int]:
-    """Parse ``"1,10,80"`` or ``"5:100:5"`` (start:stop:step, inclusive) into sorted stages."""
-    stages: set[int] = set()
-    try:
-        for part in text.split(","):
-            part = part.strip()
-            if not part:
-                continue
-            if ":" in part:
-                bits = [int(b) for b in part.split(":")]
-                start, stop = bits[0], bits[1]
-                step = bits[2] if len(bits) > 2 else 1
-                if step < 1:
-                    raise ValueError
-                stages.update(range(start, stop + 1, step))
-            else:
-                stages.add(int(part))
-    except ValueError:
-        raise BenchSimError(
-            f"--stages = {text!r}: expected integers like '1,10,80' or ranges like '5:100:5'"
-        ) from None
-    if not stages or min(stages) < 1 or (max_stage is not None and max(stages) > max_stage):
-        top = max_stage if max_stage is not None else "rows"
-        raise BenchSimError(f"--stages = {text!r}: stages must lie in 1..{top}")
-    return sorted(stages)
-
-
 @app.command()
 def doctor() -> None:
     """Print the chosen Mitsuba variant, the LLVM library and why, memory, and versions.
@@ -304,16 +277,17 @@ def render(
 @app.command()
 def ptc(
     config: ConfigArg = DEFAULT_CONFIG_PATH,
-    stages: Annotated[str, typer.Option("--stages", help="e.g. 1,10,80")] = "1,10,80",
+    stages: Annotated[str, typer.Option("--stages", help="e.g. 1,10,80, 5:100:5 or all")] = "1,10,80",
     seed: SeedOpt = 0,
     out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/ptc"),
 ) -> None:
     """Photon-transfer series through the sensor and DTDI: EMVA 1288 files and results."""
     from bench_sim.config import load_config
     from bench_sim.experiments.ptc import run_ptc
+    from bench_sim.experiments.simulate import parse_stages_arg
 
     cfg = load_config(config)
-    run_ptc(cfg, stages=parse_stages(stages, cfg.sensor.rows), seed=seed, out=out)
+    run_ptc(cfg, stages=list(parse_stages_arg(stages, cfg.sensor.rows)), seed=seed, out=out)
 
 
 @app.command()

@@ -162,8 +162,10 @@ def test_cli_ptc_writes_results(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--stages", "1,17"], "stages must lie in 1..16"),
-        (["--stages", "0"], "stages must lie in 1..16"),
+        (["--stages", "1,17"], "stage 17 outside 1..16"),
+        (["--stages", "0"], "stage 0 outside 1..16"),
+        (["--stages", "1,4,4"], "stage 4 is given twice"),
+        (["--stages", "1:8:0"], "ranges like '5:100:5'"),
         (["--stages", "a,b"], "--stages"),
         (["--stages", "1,4", "--seed", "-1"], "seed"),
     ],

@@ -307,7 +307,7 @@ def test_cli_writes_each_format(tmp_path, fmt):
         (["--stages", "0,8"], "", "stage 0 outside 1..12"),
         (["--stages", "2,13"], "", "stage 13 outside 1..12"),
         (["--stages", "8,2,8"], "", "stage 8 is given twice"),
-        (["--stages", "two"], "", "expected 'all' or comma-separated"),
+        (["--stages", "two"], "", "expected 'all', integers like '10,80'"),
         (["--format", "hdf5"], "", "--format = 'hdf5'"),
         ([], '[target]\nlayout = "image"\nimage = "missing.png"\n', "missing.png'?: no such file"),
         ([], '[target]\nlayout = "image"\nimage = "broken.png"\n', "broken.png'?: cannot read"),

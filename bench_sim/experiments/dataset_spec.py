@@ -101,21 +101,26 @@ def _finite(**values: float) -> None:
             raise ValueError(f"{k} = {v}: must be finite")
 
 
-class Uniform(_Strict):
-    """Uniform in ``[low, high)``."""
+class _Interval(_Strict):
+    """A distribution over ``[low, high)``: both finite, ``low < high``."""
 
-    dist: Literal["uniform"]
     low: float
     high: float
 
     @model_validator(mode="after")
-    def _order(self) -> Uniform:
+    def _order(self) -> _Interval:
         _finite(low=self.low, high=self.high)
         if not self.low < self.high:
             raise ValueError(
                 f"low = {self.low} must be below high = {self.high} (a fixed value goes in [config])"
             )
         return self
+
+
+class Uniform(_Interval):
+    """Uniform in ``[low, high)``."""
+
+    dist: Literal["uniform"]
 
     def draw(self, rng: np.random.Generator) -> float:
         return float(rng.uniform(self.low, self.high))
@@ -124,21 +129,12 @@ class Uniform(_Strict):
         return [self.low, self.high, self.low + _INTERIOR * (self.high - self.low)]
 
 
-class LogUniform(_Strict):
+class LogUniform(_Interval):
     """``exp`` of a uniform draw in ``[ln low, ln high)``: every decade equally likely."""
 
     dist: Literal["loguniform"]
     low: Annotated[float, Field(gt=0)]
     high: Annotated[float, Field(gt=0)]
-
-    @model_validator(mode="after")
-    def _order(self) -> LogUniform:
-        _finite(low=self.low, high=self.high)
-        if not self.low < self.high:
-            raise ValueError(
-                f"low = {self.low} must be below high = {self.high} (a fixed value goes in [config])"
-            )
-        return self
 
     def draw(self, rng: np.random.Generator) -> float:
         return float(np.exp(rng.uniform(np.log(self.low), np.log(self.high))))

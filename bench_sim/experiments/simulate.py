@@ -86,9 +86,12 @@ def resolve_config(config: BenchConfig | str | Path | Mapping[str, Any] | None) 
     )
 
 
-def check_stages(stages: Iterable[int] | str, rows: int, what: str = "stages") -> tuple[int, ...]:
+def check_stages(
+    stages: Iterable[int] | str, rows: int, what: str = "stages", given: str | None = None
+) -> tuple[int, ...]:
     """Validate requested stages: integers in ``1 .. rows``, no duplicates; ``"all"`` means
-    ``1 .. rows``. Returns them sorted; raises :class:`BenchSimError` (one line) otherwise."""
+    ``1 .. rows``. Returns them sorted; raises :class:`BenchSimError` (one line) otherwise,
+    quoting ``given`` (what the user wrote, e.g. the ``--stages`` text) or the stages."""
     if isinstance(stages, str):
         if stages.strip() == "all":
             return tuple(range(1, rows + 1))
@@ -97,19 +100,20 @@ def check_stages(stages: Iterable[int] | str, rows: int, what: str = "stages") -
         items = list(stages)
     except TypeError:
         raise BenchSimError(f"{what} = {stages!r}: expected a list of stages or 'all'") from None
+    shown = given if given is not None else repr(items)
     if not items:
         raise BenchSimError(f"{what}: at least one stage is needed")
     out = []
     for m in items:
         if isinstance(m, bool) or not isinstance(m, int | np.integer):
-            raise BenchSimError(f"{what} = {items!r}: {m!r} is not an integer stage")
+            raise BenchSimError(f"{what} = {shown}: {m!r} is not an integer stage")
         out.append(int(m))
     dup = sorted({m for m in out if out.count(m) > 1})
     if dup:
-        raise BenchSimError(f"{what} = {out}: stage {dup[0]} is given twice (each stage once)")
+        raise BenchSimError(f"{what} = {shown}: stage {dup[0]} is given twice (each stage once)")
     bad = [m for m in out if not 1 <= m <= rows]
     if bad:
-        raise BenchSimError(f"{what} = {out}: stage {bad[0]} outside 1..{rows} (sensor.rows = {rows})")
+        raise BenchSimError(f"{what} = {shown}: stage {bad[0]} outside 1..{rows} (sensor.rows = {rows})")
     return tuple(sorted(out))
 
 
@@ -433,17 +437,26 @@ FORMATS = {"zarr": "simulation.zarr", "netcdf": "simulation.nc", "tiff": "meta.j
 
 
 def parse_stages_arg(text: str, rows: int) -> tuple[int, ...]:
-    """``--stages``: ``"all"`` or comma-separated stages (``"10,80"``), each once, in ``1..rows``."""
+    """``--stages``: ``"all"``, or comma-separated stages and inclusive ranges
+    ``start:stop[:step]`` (``"10,80"``, ``"5:100:5"``), each stage once, in ``1..rows``
+    (:func:`check_stages`). Returns them sorted; one-line :class:`BenchSimError` otherwise."""
     if text.strip() == "all":
         return check_stages("all", rows, "--stages")
-    parts = [p.strip() for p in text.split(",")]
+    stages: list[int] = []
     try:
-        stages = [int(p) for p in parts]
+        for part in (p.strip() for p in text.split(",")):
+            bits = [int(b) for b in part.split(":")]
+            if len(bits) == 1:
+                stages.append(bits[0])
+            elif len(bits) in (2, 3) and (len(bits) == 2 or bits[2] >= 1):
+                stages.extend(range(bits[0], bits[1] + 1, bits[2] if len(bits) == 3 else 1))
+            else:
+                raise ValueError
     except ValueError:
         raise BenchSimError(
-            f"--stages = {text!r}: expected 'all' or comma-separated integers like '10,80'"
+            f"--stages = {text!r}: expected 'all', integers like '10,80' or ranges like '5:100:5'"
         ) from None
-    return check_stages(stages, rows, "--stages")
+    return check_stages(stages, rows, "--stages", given=repr(text))
 
 
 def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, Any]) -> list[str]:
