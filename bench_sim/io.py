@@ -43,6 +43,7 @@ import re
 import shutil
 import signal
 import tempfile
+import threading
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
@@ -129,10 +130,15 @@ def _fault(point: str, path: Path) -> None:
         time.sleep(1.0)  # the handler runs here (or the process is gone)
 
 
+_FILES_LOCK = threading.Lock()
+
+
 def _file_written(path: Path) -> None:
     global _FILES_WRITTEN
-    _FILES_WRITTEN += 1
-    _fault(str(_FILES_WRITTEN), path)
+    with _FILES_LOCK:  # files may be written from a thread pool
+        _FILES_WRITTEN += 1
+        n = _FILES_WRITTEN
+    _fault(str(n), path)
 
 
 #: temporary folders of the output sets being written by this process (a write failure inside

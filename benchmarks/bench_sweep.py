@@ -22,7 +22,6 @@ import time
 from pathlib import Path
 
 from bench_sim.config import SCENES_DIR
-from bench_sim.io import read_png_text
 
 SPEC = """
 name = "bench_light_power"
@@ -65,8 +64,8 @@ def main() -> None:
             rows.append((name, wall, cpu, meta["mitsuba_renders"]))
         k = max(1, min(a.reproduce_runs, a.points))
         runs = [_bench_sim("reproduce", "--quick", "--out", str(Path(tmp) / f"rep_{i}")) for i in range(k)]
-        # each reproduce process renders its records anew (provenance of its PNGs: render info)
-        renders = int(read_png_text(Path(tmp) / "rep_0" / "gamma_tra.png")["render"]["mitsuba_renders"])
+        # each reproduce process renders its records anew (metrics.json: renders of that process)
+        renders = int(json.loads((Path(tmp) / "rep_0" / "metrics.json").read_text())["mitsuba_renders"])
         rows.append((f"reproduce --quick x {a.points}" + ("" if k == a.points else f" (timed {k}, scaled)"),
                      sum(r[0] for r in runs) * a.points / k, sum(r[1] for r in runs) * a.points / k,
                      renders * a.points))

@@ -1,6 +1,7 @@
 """Same config and seed, byte-identical data files: wall-clock times live only in the documented
 timing fields (``meta.json``'s ``wall_s`` and ``mitsuba_renders`` of ``render``; ``metrics.json``'s
-``wall_s`` and ``timings_s`` and the report of ``reproduce``, tested in ``test_reproduce.py``)."""
+``wall_s``, ``timings_s`` and ``mitsuba_renders`` and the report of ``reproduce``, tested in
+``test_reproduce.py``)."""
 
 from __future__ import annotations
 

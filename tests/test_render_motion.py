@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import drjit as dr
 import numpy as np
 import pytest
@@ -131,3 +136,25 @@ def test_smear_filter_is_the_box_integral_of_the_linear_interpolant(smear_texels
         f = (y - j)[:, None]
         expected[i] = ((1 - f) * ext[j] + f * ext[j + 1]).mean(axis=0)
     np.testing.assert_allclose(got, expected, rtol=2e-5, atol=2e-6)
+
+
+def test_mesh_files_are_written_once_and_removed_at_exit(tmp_path):
+    """The drum's PLY files are written once per process and drum configuration, into one
+    temporary folder that is gone when the process exits (sweeps used to leave a folder per
+    scene in /tmp)."""
+    code = (
+        "from bench_sim.rig.scene import _mesh_files\n"
+        "from tests.conftest import tiny_cfg\n"
+        "a = _mesh_files(tiny_cfg(drum={'geometry': 'mesh'}))\n"
+        "t = {k: p.stat().st_mtime_ns for k, p in a.items()}\n"
+        "b = _mesh_files(tiny_cfg(drum={'geometry': 'mesh'}))\n"
+        "c = _mesh_files(tiny_cfg(drum={'geometry': 'mesh', 'bench': False}))\n"
+        "assert a == b and {k: p.stat().st_mtime_ns for k, p in b.items()} == t\n"
+        "assert set(a) - set(c) == {'bench'} and a['body'].parent != c['body'].parent\n"
+        "print(len(list(a['body'].parent.parent.iterdir())))\n"
+    )
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         cwd=Path(__file__).resolve().parents[1], check=True)
+    assert out.stdout.strip() == "2"
+    assert list(tmp_path.iterdir()) == []

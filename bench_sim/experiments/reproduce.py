@@ -299,6 +299,8 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         timer.add("write", time.perf_counter() - t0)
         metrics["timings_s"] = {k: round(v, 3) for k, v in timer.steps.items()}
         metrics["wall_s"] = round(time.perf_counter() - t_start, 3)
+        # like the timings, a fact of this process (fewer when it had the records cached)
+        metrics["mitsuba_renders"] = int(setup.info["mitsuba_renders"])
         write_json(tmp / "metrics.json", metrics)
         write_report(tmp / "report.md", metrics, cfg, quick)
     for step, s in metrics["timings_s"].items():

@@ -11,8 +11,10 @@ within a frame reuse one compiled kernel.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import tempfile
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -168,15 +170,43 @@ def _drum_bsdf(cfg: BenchConfig, reflectance: Any) -> dict[str, Any]:
     return {"type": "diffuse", "reflectance": reflectance}
 
 
-def _mesh_shapes(mi: Any, cfg: BenchConfig, drum_bsdf: dict[str, Any]) -> dict[str, Any]:
+_MESH_FOLDER: tempfile.TemporaryDirectory[str] | None = None
+_MESH_LOCK = threading.Lock()
+
+
+def _mesh_files(cfg: BenchConfig) -> dict[str, Path]:
+    """PLY files of the drum's meshes, written once per process and drum configuration.
+
+    Mitsuba's ``ply`` shape reads its mesh from a file. The files live in one temporary folder
+    per process, removed when the process exits (``TemporaryDirectory``'s finaliser), and are
+    named by a hash of ``[drum]`` so a sweep over other keys writes them once.
+    """
+    with _MESH_LOCK:
+        return _mesh_files_locked(cfg)
+
+
+def _mesh_files_locked(cfg: BenchConfig) -> dict[str, Path]:
     from bench_sim.rig.drum_mesh import drum_meshes
 
-    folder = Path(tempfile.mkdtemp(prefix="bench_sim_mesh_"))
+    global _MESH_FOLDER
+    if _MESH_FOLDER is None:
+        _MESH_FOLDER = tempfile.TemporaryDirectory(prefix="bench_sim_mesh_")
+    key = hashlib.sha256(cfg.drum.model_dump_json().encode()).hexdigest()[:16]
+    folder = Path(_MESH_FOLDER.name) / key
+    done = folder / "parts.txt"  # written last: the list of parts whose files are complete
+    if not done.is_file():
+        folder.mkdir(exist_ok=True)
+        meshes = drum_meshes(cfg.drum)
+        for name, mesh in meshes.items():
+            mesh.export(folder / f"{name}.ply")
+        done.write_text("\n".join(meshes))
+    return {name: folder / f"{name}.ply" for name in done.read_text().split()}
+
+
+def _mesh_shapes(mi: Any, cfg: BenchConfig, drum_bsdf: dict[str, Any]) -> dict[str, Any]:
     shapes: dict[str, Any] = {}
     albedo = {"mounts": cfg.drum.mount_albedo, "axle": cfg.drum.mount_albedo, "bench": cfg.drum.bench_albedo}
-    for name, mesh in drum_meshes(cfg.drum).items():
-        path = folder / f"{name}.ply"
-        mesh.export(path)
+    for name, path in _mesh_files(cfg).items():
         if name in ("body", "caps"):
             bsdf = drum_bsdf
         else:
