@@ -60,6 +60,7 @@ except ImportError:  # pragma: no cover - not on POSIX
 
 __all__ = [
     "atomic_path",
+    "sha256_file",
     "output_set",
     "output_files",
     "check_output_dir",
@@ -800,16 +801,28 @@ def write_emva_descriptor(
     return write_text(path, "\n".join(lines) + "\n")
 
 
+_IMAGE_SUFFIXES = (".tif", ".tiff", ".png", ".exr", ".npy")
+
+
+def _image_file(path: str | os.PathLike[str]) -> tuple[Path, str]:
+    """An existing image file and its lower-case suffix, or :class:`ImageReadError` (one line)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ImageReadError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix not in _IMAGE_SUFFIXES:
+        allowed = ", ".join(_IMAGE_SUFFIXES)
+        raise ImageReadError(f"{path}: unsupported file type '{suffix}' (allowed: {allowed})")
+    return path, suffix
+
+
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     """Read a single-channel image as a float64 2-D array.
 
     Supported: 8/16-bit grayscale TIFF and PNG, single-channel (or first-channel) EXR, and NPY.
     Raises :class:`ImageReadError` with the file name for anything else.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise ImageReadError(f"{path}: no such file")
-    suffix = path.suffix.lower()
+    path, suffix = _image_file(path)
     try:
         if suffix == ".npy":
             arr = np.load(path, allow_pickle=False)
@@ -825,12 +838,6 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
             import imageio.v3 as iio
 
             arr = iio.imread(path)
-        else:
-            raise ImageReadError(
-                f"{path}: unsupported file type '{suffix}' (allowed: .tif, .tiff, .png, .exr, .npy)"
-            )
-    except ImageReadError:
-        raise
     except Exception as exc:
         raise ImageReadError(f"{path}: cannot read image ({exc})") from exc
     arr = np.asarray(arr)
@@ -841,14 +848,17 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     return arr.astype(np.float64)
 
 
+def sha256_file(path: str | os.PathLike[str]) -> str:
+    """SHA-256 (hex) of a file's bytes, read in blocks (input files' provenance)."""
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
 def image_shape(path: str | os.PathLike[str]) -> tuple[int, ...]:
     """The array shape of an image file from its header, without decoding the pixels (for the
     up-front memory estimate). Same formats as :func:`read_image`; raises
     :class:`ImageReadError` (one line) for a missing, unsupported or unreadable file."""
-    path = Path(path)
-    if not path.is_file():
-        raise ImageReadError(f"{path}: no such file")
-    suffix = path.suffix.lower()
+    path, suffix = _image_file(path)
     try:
         if suffix == ".npy":
             return tuple(np.load(path, mmap_mode="r", allow_pickle=False).shape)
@@ -872,4 +882,4 @@ def image_shape(path: str | os.PathLike[str]) -> tuple[int, ...]:
     except Exception as exc:  # the readers raise many kinds for a broken file
         detail = " ".join(str(exc).split())[:120]
         raise ImageReadError(f"{path}: cannot read image header ({detail})") from None
-    raise ImageReadError(f"{path}: unsupported file type '{suffix}' (allowed: .tif, .tiff, .png, .exr, .npy)")
+    raise AssertionError(suffix)  # _image_file allows only the suffixes handled above

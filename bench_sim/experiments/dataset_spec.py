@@ -61,6 +61,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from bench_sim.config import DEFAULT_CONFIG_PATH, BenchConfig, load_config, with_overrides
 from bench_sim.errors import BenchSimError
 from bench_sim.experiments.execution import task_seed_sequence
+from bench_sim.io import sha256_file
 
 __all__ = [
     "DISTRIBUTIONS",
@@ -307,13 +308,6 @@ def sample_streams(seed: int, index: int) -> tuple[np.random.SeedSequence, np.ra
     return params, simulation
 
 
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
 
 @dataclass(frozen=True)
 class DatasetSpec:
@@ -494,7 +488,7 @@ def load_spec(path: str | Path) -> DatasetSpec:
     for dist in randomize.values():
         if isinstance(dist, Glob):
             for f in dist.files:
-                images[f] = _sha256_file(path.parent / f)
+                images[f] = sha256_file(path.parent / f)
     spec = DatasetSpec(
         path=path, name=top.name or path.stem, description=top.description, samples=top.samples,
         seed=top.seed, stages=stages, base=base, randomize=randomize, raw=raw, images=images,

@@ -24,7 +24,6 @@ option, the value and what is allowed.
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import math
 import os
@@ -38,7 +37,15 @@ from bench_sim.config import TRA_METHODS
 from bench_sim.errors import BenchSimError
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
 from bench_sim.fusion.tonemap import gamma_tra
-from bench_sim.io import check_output_file, image_shape, output_files, read_image, write_exr, write_png
+from bench_sim.io import (
+    check_output_file,
+    image_shape,
+    output_files,
+    read_image,
+    sha256_file,
+    write_exr,
+    write_png,
+)
 from bench_sim.resources import check_resources, estimate_fuse
 from bench_sim.sensor.model import check_beta_bits
 
@@ -101,13 +108,6 @@ def _read_quietly(path: Path) -> np.ndarray:
     finally:
         log.setLevel(level)
 
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def fuse_files(
@@ -201,8 +201,8 @@ def fuse_files(
         "method": "paper eq. 11 (fuse_dtdi_hdr_eq11)",
         "version": __version__,
         "inputs": {
-            "low": {"path": str(low_p), "sha256": _sha256(low_p), "shape": list(g1.shape)},
-            "high": {"path": str(high_p), "sha256": _sha256(high_p), "shape": list(g2.shape)},
+            "low": {"path": str(low_p), "sha256": sha256_file(low_p), "shape": list(g1.shape)},
+            "high": {"path": str(high_p), "sha256": sha256_file(high_p), "shape": list(g2.shape)},
         },
         "mu1": mu1,
         "mu2": mu2,
