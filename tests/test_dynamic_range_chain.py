@@ -72,14 +72,19 @@ def test_gain_over_gamma1_is_the_read_noise_ratio(dr12: ChainDR) -> None:
 
 def test_pixel_limited_gain_shrinks(dr16: ChainDR) -> None:
     """beta = 16: stage 10 clips on the pixel, not the word; the gain over Gamma2 is the ratio of
-    the two clips (model), about 1.5 dB, not eq. 15's 18 dB, and not 'by construction'."""
+    the two clips (model), about 1.5 dB, not eq. 15's 18 dB, and not 'by construction'. With
+    the extrapolated saturation points it is that ratio exactly; with EMVA's variance maxima
+    (located from 32 x 64-pixel pairs) it scatters: over 12 seeds -0.14 +- 0.14 dB from the
+    ratio (the variance peaks a little below the clip), so 0.6 dB is over 3 sigma."""
     assert not dr16.gain_over_gamma2_by_construction
     ped = dr16.pedestal_dn
     sat = {
         m: stage_saturation_photons(CFG.sensor, CFG.timing.t_int_s, m, beta_bits=16, pedestal_dn=ped)
         for m in (MU1, MU2)
     }
-    assert dr16.gain_over_gamma2_db == pytest.approx(20 * math.log10(sat[MU1] / sat[MU2]), abs=0.3)
+    ratio_db = 20 * math.log10(sat[MU1] / sat[MU2])
+    assert dr16.as_dict()["delta_db_vs_gamma2_extrapolated"] == pytest.approx(ratio_db, abs=0.05)
+    assert dr16.gain_over_gamma2_db == pytest.approx(ratio_db, abs=0.6)
     assert dr16.dr_db["gamma2"] > dr16.dr_db["gamma1"]
 
 
@@ -151,12 +156,17 @@ def test_gain_without_black_subtraction() -> None:
     assert r.gain_over_gamma2_db == pytest.approx(predicted, abs=1.5)  # variance maxima: near it
 
 
-def test_measure_chain_dynamic_range_is_deterministic() -> None:
+def test_measure_chain_dynamic_range_is_deterministic_for_any_thread_count(monkeypatch) -> None:
+    """The levels run on the thread pool, each with its own stream: 1 and 2 threads give the
+    same series (refinement rounds included), another seed another one."""
     kw = {"n_levels": 10, "lines": 4, "columns": 8}
+    monkeypatch.setenv("BENCH_SIM_THREADS", "2")
     a = measure_chain_dynamic_range(CFG, 7, **kw).as_dict()
+    monkeypatch.setenv("BENCH_SIM_THREADS", "1")
     b = measure_chain_dynamic_range(CFG, 7, **kw).as_dict()
     c = measure_chain_dynamic_range(CFG, 8, **kw).as_dict()
     assert a == b
+    assert len(a["images"]["gamma2"]["mean_dn"]) > 11  # the refinement rounds added levels
     assert a["images"]["gamma2"]["mean_dn"] != c["images"]["gamma2"]["mean_dn"]
 
 

@@ -80,8 +80,10 @@ def test_quick_shows_the_papers_qualitative_result(quick_runs):
     assert snr["gamma_hdr"] >= 3.0 and snr["gamma_hdr"] == pytest.approx(snr["gamma2"])
     assert all(m["qualitative"].values())
     # through the whole chain the DR gain over Gamma2 is eq. 15's 18.06 dB (both stages are
-    # limited by the 12-bit output word)
-    assert m["delta_dr_db_vs_gamma2"] == pytest.approx(m["delta_psi_db_eq15"], abs=0.3)
+    # limited by the 12-bit output word): exactly with the extrapolated saturation points, and
+    # within the scatter of the variance maxima (a few tenths of a dB) with EMVA's
+    assert m["delta_dr_db_vs_gamma2_extrapolated"] == pytest.approx(m["delta_psi_db_eq15"], abs=0.05)
+    assert m["delta_dr_db_vs_gamma2"] == pytest.approx(m["delta_psi_db_eq15"], abs=0.8)
 
 
 def test_same_seed_gives_identical_metrics_except_timing(quick_runs):
@@ -134,7 +136,7 @@ def test_report_states_what_this_run_measured(tmp_path, overrides, clips_on_word
     assert m["stage_clips_on_word"] == clips_on_word
     assert f"Gain over Gamma2: {m['delta_dr_db_vs_gamma2']:.2f} dB" in report
     assert f"20 lg({mu2}/{mu1}) = {eq15:.2f} dB" in report
-    agrees = abs(m["delta_dr_db_vs_gamma2"] - eq15) <= 0.5
+    agrees = abs(m["delta_dr_db_vs_gamma2_extrapolated"] - eq15) <= 0.5  # clip points, as eq. 15
     if all(clips_on_word.values()):
         assert m["gain_over_gamma2_by_construction"] and agrees and "*by construction*" in report
     else:

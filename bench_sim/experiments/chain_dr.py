@@ -58,6 +58,7 @@ from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.metrics.dynamic_range import dr_increase_eq15_db
 from bench_sim.metrics.emva1288 import SaturationMethod, dynamic_range_from_series, mean_var_from_pair
 from bench_sim.metrics.snr import snr_versus_signal
+from bench_sim.parallel import chunk_generator, parallel_map, seed_sequence
 from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import (
     full_scale_dn,
@@ -145,6 +146,13 @@ class ChainDR:
         return self.images["hdr"].dr_db - self.images["gamma2"].dr_db
 
     @property
+    def gain_over_gamma2_extrapolated_db(self) -> float:
+        """``DR(HDR) - DR(Gamma2)`` [dB] with the extrapolated saturation points (where the
+        linear response meets the clipped plateau): the ratio of the clip points that eq. 15
+        is about, free of the scatter of the variance maxima (a few tenths of a dB)."""
+        return self.images["hdr"].dr_db_extrapolated - self.images["gamma2"].dr_db_extrapolated
+
+    @property
     def gain_over_gamma2_by_construction(self) -> bool:
         """True when both stages clip on the output word with the same offset: the gain over
         ``Gamma2`` is then ``20 lg(mu2/mu1)`` by construction (see the module doc)."""
@@ -217,8 +225,7 @@ class ChainDR:
             "model_dr_db": dict(self.model_dr_db),
             "delta_db_vs_gamma1": self.gain_over_gamma1_db,
             "delta_db_vs_gamma2": self.gain_over_gamma2_db,
-            "delta_db_vs_gamma2_extrapolated": self.images["hdr"].dr_db_extrapolated
-            - self.images["gamma2"].dr_db_extrapolated,
+            "delta_db_vs_gamma2_extrapolated": self.gain_over_gamma2_extrapolated_db,
             "stage_clips_on_word": {str(m): v for m, v in self.stage_clips_on_word.items()},
             "gain_over_gamma2_by_construction": self.gain_over_gamma2_by_construction,
             "eq15_db": self.eq15_db,
@@ -244,16 +251,25 @@ def default_levels(
     return np.concatenate([[0.0], np.geomspace(p_lo, p_hi, n_levels)])
 
 
+def _child(root: np.random.SeedSequence, key: int) -> np.random.SeedSequence:
+    """Child ``key`` of ``root`` (as ``root.spawn``'s ``key``-th child, without spawning)."""
+    return np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key, int(key)))
+
+
 def _series(
-    cfg: BenchConfig, mu1: int, mu2: int, levels: np.ndarray, rng: np.random.Generator, fixed: Any,
+    cfg: BenchConfig, mu1: int, mu2: int, levels: np.ndarray, noise: np.random.SeedSequence, fixed: Any,
     lines: int, columns: int, pedestal: int, offsets: dict[int, float],
 ) -> dict[str, np.ndarray]:
-    """Per image: (levels, 2) array of (mean [DN], temporal variance [DN^2]), offsets removed."""
-    stats = {name: np.zeros((levels.size, 2)) for name in IMAGES}
-    for li, level in enumerate(levels):
+    """Per image: (levels, 2) array of (mean [DN], temporal variance [DN^2]), offsets removed.
+
+    Level ``i`` draws its temporal noise from its own stream (:func:`chunk_generator`
+    ``(noise, i)``), so the levels run on the thread pool and the series does not depend on the
+    number of threads."""
+
+    def level(i: int) -> dict[str, tuple[float, float]]:
         st = expose_uniform(
-            cfg, (mu1, mu2), float(level), rng, fixed=fixed, lines=lines, columns=columns, images=2,
-            pedestal_dn=pedestal,
+            cfg, (mu1, mu2), float(levels[i]), chunk_generator(noise, i), fixed=fixed, lines=lines,
+            columns=columns, images=2, pedestal_dn=pedestal,
         )
         g1 = st[mu1].reshape(2 * lines, columns)
         g2 = st[mu2].reshape(2 * lines, columns)
@@ -261,9 +277,10 @@ def _series(
             g1, g2, mu1=mu1, mu2=mu2, beta=cfg.dtdi.beta_bits, pedestal_dn=(offsets[mu1], offsets[mu2])
         )
         images = {"gamma1": g1 - offsets[mu1], "gamma2": g2 - offsets[mu2], "hdr": fused.hdr}
-        for name, img in images.items():
-            stats[name][li] = mean_var_from_pair(img[:lines], img[lines:])
-    return stats
+        return {name: mean_var_from_pair(img[:lines], img[lines:]) for name, img in images.items()}
+
+    per_level = parallel_map(level, range(levels.size))
+    return {name: np.array([r[name] for r in per_level], dtype=np.float64).reshape(-1, 2) for name in IMAGES}
 
 
 def measure_chain_dynamic_range(
@@ -288,8 +305,10 @@ def measure_chain_dynamic_range(
         Bench config: sensor, timing, DTDI (word, pedestal) and the fused stages
         (``fusion.mu1``, ``fusion.mu2`` unless given).
     seed
-        Seed of the measurement's random generator (a ``Generator`` is used as is): fixed
-        pattern first, then the temporal noise of the levels in order.
+        Seed of the measurement's random generator (a ``Generator`` is used as is): the fixed
+        pattern first, then one ``SeedSequence`` whose children give every level of every
+        series (first, then each refinement round) its own temporal-noise stream, so the
+        levels run on the thread pool and the result does not depend on the thread count.
     mu1, mu2
         Stages fused (default: the config's).
     levels
@@ -325,10 +344,11 @@ def measure_chain_dynamic_range(
         raise BenchSimError("levels: need finite photon levels >= 0")
     rng = np.random.default_rng(seed)
     fixed = draw_fixed_pattern(cfg.sensor, rng)
-    args = (rng, fixed, lines, columns, pedestal, offsets)
-    stats = _series(cfg, mu1, mu2, p, *args)
+    noise = seed_sequence(rng)  # series r: levels' streams under (noise, r)
+    args = (fixed, lines, columns, pedestal, offsets)
+    stats = _series(cfg, mu1, mu2, p, _child(noise, 0), *args)
     if saturation != "extrapolated":
-        for _ in range(refine_rounds):
+        for r in range(1, refine_rounds + 1):
             extra: list[np.ndarray] = []
             for name in IMAGES:
                 i = int(np.argmax(stats[name][:, 1]))
@@ -338,7 +358,7 @@ def measure_chain_dynamic_range(
             new = np.setdiff1d(np.unique(np.concatenate(extra)), p) if extra else np.array([])
             if not new.size:
                 break
-            more = _series(cfg, mu1, mu2, new, *args)
+            more = _series(cfg, mu1, mu2, new, _child(noise, r), *args)
             allp = np.concatenate([p, new])
             order = np.argsort(allp, kind="stable")
             p = allp[order]

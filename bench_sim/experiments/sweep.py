@@ -81,7 +81,9 @@ COLUMNS: dict[str, tuple[str, str, str]] = {
     "gain_db_vs_gamma1": ("dB", CAMERA, "DR(Gamma_HDR) - DR(Gamma1)"),
     "gain_db_vs_gamma2": ("dB", CAMERA, "DR(Gamma_HDR) - DR(Gamma2)"),
     "eq15_db": ("dB", CAMERA, "eq. 15: 20 lg(mu2 / mu1)"),
-    "eq15_error_db": ("dB", CAMERA, "gain over Gamma2 minus eq. 15"),
+    "gain_db_vs_gamma2_extrapolated": ("dB", CAMERA, "gain over Gamma2 with the extrapolated "
+                                       "saturation points (the clip points eq. 15 is about)"),
+    "eq15_error_db": ("dB", CAMERA, "gain over Gamma2 (extrapolated saturation) minus eq. 15"),
     "eq15_by_construction": ("1", CAMERA, "both stages clip on the output word with one offset: "
                              "the gain over Gamma2 is eq. 15 by construction"),
     "scene_range_db": ("dB", SCENE, "range of the wedge as lit: 20 lg(brightest / darkest step)"),
@@ -199,7 +201,8 @@ def measure_point(task: PointTask) -> dict[str, Any]:
         "gain_db_vs_gamma1": dr.gain_over_gamma1_db,
         "gain_db_vs_gamma2": dr.gain_over_gamma2_db,
         "eq15_db": dr.eq15_db,
-        "eq15_error_db": dr.gain_over_gamma2_db - dr.eq15_db,
+        "gain_db_vs_gamma2_extrapolated": dr.gain_over_gamma2_extrapolated_db,
+        "eq15_error_db": dr.gain_over_gamma2_extrapolated_db - dr.eq15_db,
         "eq15_by_construction": dr.gain_over_gamma2_by_construction,
         "scene_range_db": pm.scene_range_db,
         "saturated_fraction_gamma1": pm.saturated_fraction["gamma1"],
