@@ -47,16 +47,6 @@ def stage_display(stage_dn: np.ndarray, beta: int, gamma: float = 2.2) -> np.nda
     return x ** np.float32(1.0 / gamma)
 
 
-def _for_display(img: np.ndarray, panel_px: float) -> np.ndarray:
-    """``img`` area-averaged by the largest whole factor that keeps it at least ``panel_px``
-    pixels wide: what a panel of that width cannot show anyway (the figure resamples less)."""
-    from bench_sim.rig.target_sources import area_resize
-
-    h, w = img.shape
-    f = max(1, int(w // panel_px))
-    return img if f == 1 else area_resize(img, max(h // f, 1), w // f)
-
-
 def _save(path: Path, fig: Any, meta: Mapping[str, Any]) -> Path:
     """:func:`bench_sim.io.write_figure_png`, which closes the figure. (No ``gc.collect()``
     after it: 0.07 s a figure, and the run's peak memory is the same without it.)"""
@@ -139,6 +129,8 @@ def fig4_hdr(
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
+    from bench_sim.rig.target_sources import area_resize
+
     fig = plt.figure(figsize=(11, 9.4), dpi=110)
     # fixed margins (no layout engine: it costs more than drawing)
     grid = fig.add_gridspec(
@@ -150,11 +142,14 @@ def fig4_hdr(
         (big[0], hdr_display, "(a) $\\Gamma_{HDR}$ (linear display)"),
         (big[1], tra, f"(b) $\\Gamma_{{TRA}}$ ({tra_name} transform)"),
     ):
-        # area-averaged to what the axes show; extent keeps the full-resolution coordinates
+        # area-averaged to the axes' pixels (the figure then hardly resamples); extent keeps the
+        # full-resolution coordinates for the inset frames
         h, w = img.shape
         box = ax.get_window_extent()
-        shown = _for_display(img, w * min(box.width / w, box.height / h))
-        ax.imshow(shown, cmap="gray", vmin=0, vmax=1, extent=(-0.5, w - 0.5, h - 0.5, -0.5))
+        scale = min(box.width / w, box.height / h)
+        shown = area_resize(img, max(1, round(h * scale)), max(1, round(w * scale))) if scale < 1 else img
+        ax.imshow(shown.astype(np.float32), cmap="gray", vmin=0, vmax=1,
+                  extent=(-0.5, w - 0.5, h - 0.5, -0.5))
         ax.set_title(title, fontsize=10, y=1.0)
         ax.set_axis_off()
         for box, colour in ((dark_box, "tab:cyan"), (bright_box, "tab:orange")):
