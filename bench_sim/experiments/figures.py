@@ -236,6 +236,10 @@ def snr_versus_signal_figure(
     ax.axhline(1.0, color="0.7", lw=0.8)
     ax.set_xscale("log")
     ax.set_yscale("log")
+    from matplotlib.ticker import LogLocator
+
+    for axis in (ax.xaxis, ax.yaxis):  # minor ticks and grid at 2 and 5 only (a tick is costly)
+        axis.set_minor_locator(LogLocator(subs=(2.0, 5.0)))
     ax.set_xlabel("mean photons per pixel per frame")
     ax.set_ylabel("SNR (temporal)")
     ax.set_title("SNR versus signal through sensor, DTDI and eq. 11 (o: SNR = 1, squares: saturation)",
