@@ -38,6 +38,7 @@ __all__ = [
     "ordered_imap",
     "prefetch",
     "seed_sequence",
+    "child_sequence",
     "chunk_generator",
 ]
 
@@ -192,8 +193,12 @@ def seed_sequence(seed: int | np.random.SeedSequence | np.random.Generator) -> n
     return np.random.SeedSequence(int(seed))
 
 
+def child_sequence(root: np.random.SeedSequence, index: int) -> np.random.SeedSequence:
+    """Child ``index`` of ``root``: ``root.spawn(n)[index]`` for a root that has spawned nothing
+    yet, made directly (without spawning the children before it)."""
+    return np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key, int(index)))
+
+
 def chunk_generator(root: np.random.SeedSequence, index: int) -> np.random.Generator:
-    """The generator of piece ``index`` under ``root``: ``root.spawn(n)[index]`` for a root that
-    has spawned nothing yet, made directly (without spawning the pieces before it)."""
-    child = np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key, int(index)))
-    return np.random.default_rng(child)
+    """The generator of piece ``index`` under ``root`` (:func:`child_sequence`)."""
+    return np.random.default_rng(child_sequence(root, index))

@@ -58,7 +58,7 @@ from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.metrics.dynamic_range import dr_increase_eq15_db
 from bench_sim.metrics.emva1288 import SaturationMethod, dynamic_range_from_series, mean_var_from_pair
 from bench_sim.metrics.snr import snr_versus_signal
-from bench_sim.parallel import chunk_generator, parallel_map, seed_sequence
+from bench_sim.parallel import child_sequence, chunk_generator, parallel_map, seed_sequence
 from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import (
     full_scale_dn,
@@ -251,11 +251,6 @@ def default_levels(
     return np.concatenate([[0.0], np.geomspace(p_lo, p_hi, n_levels)])
 
 
-def _child(root: np.random.SeedSequence, key: int) -> np.random.SeedSequence:
-    """Child ``key`` of ``root`` (as ``root.spawn``'s ``key``-th child, without spawning)."""
-    return np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key, int(key)))
-
-
 def _series(
     cfg: BenchConfig, mu1: int, mu2: int, levels: np.ndarray, noise: np.random.SeedSequence, fixed: Any,
     lines: int, columns: int, pedestal: int, offsets: dict[int, float],
@@ -346,7 +341,7 @@ def measure_chain_dynamic_range(
     fixed = draw_fixed_pattern(cfg.sensor, rng)
     noise = seed_sequence(rng)  # series r: levels' streams under (noise, r)
     args = (fixed, lines, columns, pedestal, offsets)
-    stats = _series(cfg, mu1, mu2, p, _child(noise, 0), *args)
+    stats = _series(cfg, mu1, mu2, p, child_sequence(noise, 0), *args)
     if saturation != "extrapolated":
         for r in range(1, refine_rounds + 1):
             extra: list[np.ndarray] = []
@@ -358,7 +353,7 @@ def measure_chain_dynamic_range(
             new = np.setdiff1d(np.unique(np.concatenate(extra)), p) if extra else np.array([])
             if not new.size:
                 break
-            more = _series(cfg, mu1, mu2, new, _child(noise, r), *args)
+            more = _series(cfg, mu1, mu2, new, child_sequence(noise, r), *args)
             allp = np.concatenate([p, new])
             order = np.argsort(allp, kind="stable")
             p = allp[order]

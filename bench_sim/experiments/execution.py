@@ -35,6 +35,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from bench_sim.errors import BenchSimError
+from bench_sim.parallel import child_sequence
 
 __all__ = [
     "TaskOutcome",
@@ -89,7 +90,7 @@ def task_seed_sequence(root_seed: int, index: int) -> np.random.SeedSequence:
     """
     if root_seed < 0 or index < 0:
         raise BenchSimError(f"seed = {root_seed}, index = {index}: both must be >= 0")
-    return np.random.SeedSequence(int(root_seed), spawn_key=(int(index),))
+    return child_sequence(np.random.SeedSequence(int(root_seed)), index)
 
 
 def task_generator(root_seed: int, index: int) -> np.random.Generator:
