@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import pytest
 
 from bench_sim.config import BenchConfig, load_config, with_overrides
@@ -36,3 +37,14 @@ def tiny_cfg(**sections: Any) -> BenchConfig:
 @pytest.fixture
 def tiny() -> BenchConfig:
     return tiny_cfg()
+
+
+def subpixel_shift(a: np.ndarray, b: np.ndarray) -> float:
+    """Lag [samples] at which ``b`` best matches ``a`` (``b(x) ~ a(x - lag)``): the peak of their
+    cross-correlation, refined by a parabola through the three samples around it."""
+    a = a - a.mean()
+    b = b - b.mean()
+    xc = np.correlate(b, a, mode="full")
+    k = int(np.argmax(xc))
+    y0, y1, y2 = xc[k - 1], xc[k], xc[k + 1]
+    return k - (len(a) - 1) + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)

@@ -20,7 +20,7 @@ import bench_sim.dataset as bds
 from bench_sim.config import DEFAULT_CONFIG_PATH, config_from_dict, config_sha256, with_overrides
 from bench_sim.errors import BenchSimError
 from bench_sim.experiments.dataset import run_dataset
-from tests.test_simulate import _subpixel_shift
+from tests.conftest import subpixel_shift
 
 #: a 12 x 48 sensor on the paper rig, 32 lines, stages 2 and 8 (fused)
 TINY_SPEC = f"""
@@ -250,7 +250,7 @@ def test_truth_holds_per_sample(tmp_path):
                 for k, a in (("dn", dn), ("refl", refl))}
         for st in (0, 1):
             edges_dn, edges_refl = np.diff(prof["dn"][st][8:]), np.diff(prof["refl"][st][8:])
-            assert abs(_subpixel_shift(edges_refl, edges_dn)) < 0.1
+            assert abs(subpixel_shift(edges_refl, edges_dn)) < 0.1
         assert _fit_sync_error(prof["refl"][0], prof["refl"][1], 80) == pytest.approx(e, rel=0.1, abs=0.002)
     assert layouts == {"random_bars", "uniform"}
 
@@ -347,4 +347,28 @@ def test_bad_spec_one_line_exit_2_nothing_written(tmp_path, line, where, problem
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("bench-sim: error:"), res.output
     assert re.search(problem, lines[0]), lines[0]
+    assert not out.exists() and not list(tmp_path.glob(".out.*"))
+
+
+def test_unreachable_scheduler_is_one_line_and_writes_nothing(tmp_path, monkeypatch):
+    """--scheduler naming an address where no scheduler listens: one line naming it, exit 2,
+    nothing at --out (the connection timeout shortened from 20 s to 1 s for the test)."""
+    import socket
+
+    from typer.testing import CliRunner
+
+    from bench_sim.cli import app
+    from bench_sim.experiments import execution
+
+    monkeypatch.setitem(execution.open_client.__wrapped__.__kwdefaults__, "connect_timeout_s", 1.0)
+    with socket.socket() as sock:  # a free port: nothing listens there
+        sock.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{sock.getsockname()[1]}"
+    spec = _write_spec(tmp_path, text=TINY_SPEC.format(samples=2))
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["dataset", str(spec), "--out", str(out), "--scheduler", address])
+    assert res.exit_code == 2, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1, res.output
+    assert lines[0].startswith(f"bench-sim: error: --scheduler = '{address}': cannot reach a Dask scheduler")
     assert not out.exists() and not list(tmp_path.glob(".out.*"))

@@ -13,7 +13,7 @@ from bench_sim.config import config_from_dict
 from bench_sim.errors import BenchSimError
 from bench_sim.sensor import stage_mean_var_dn
 from bench_sim.sensor.model import stage_offset_dn
-from tests.conftest import ALL_OFF, TINY
+from tests.conftest import ALL_OFF, TINY, subpixel_shift
 
 NOISE_OFF = dict(ALL_OFF)
 TEMPORAL_OFF = dict(shot_noise=False, dark_noise=False, read_noise=False, quantization=False)
@@ -31,17 +31,6 @@ def _overrides(**sections):
         else:
             out[k] = v
     return out
-
-
-def _subpixel_shift(a: np.ndarray, b: np.ndarray) -> float:
-    """Lag [samples] at which ``b`` best matches ``a`` (``b(x) ~ a(x - lag)``): the peak of their
-    cross-correlation, refined by a parabola through the three samples around it."""
-    a = a - a.mean()
-    b = b - b.mean()
-    xc = np.correlate(b, a, mode="full")
-    k = int(np.argmax(xc))
-    y0, y1, y2 = xc[k - 1], xc[k], xc[k + 1]
-    return k - (len(a) - 1) + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
 
 
 # --- must show 1: dn equals mean_dn without noise, with and without sync error -------------------
@@ -129,11 +118,11 @@ def test_sync_error_edges_of_dn_and_reflectance_coincide():
         }
     # in each stage the edges in dn and in its truth coincide
     for m in (1, 80):
-        assert abs(_subpixel_shift(prof[m]["reflectance"], prof[m]["dn"])) < 0.1
+        assert abs(subpixel_shift(prof[m]["reflectance"], prof[m]["dn"])) < 0.1
     # and stage 80's moved against stage 1's: row i of stage m reads line j's material plus
     # i * e object pixels further along the track (to larger lines: a negative lag)
     for k in ("dn", "reflectance"):
-        assert _subpixel_shift(prof[1][k], prof[80][k]) < -1.0
+        assert subpixel_shift(prof[1][k], prof[80][k]) < -1.0
 
 
 # --- dataset contract ----------------------------------------------------------------------------

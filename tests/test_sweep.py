@@ -189,6 +189,27 @@ def test_bad_worker_options_are_one_line(spec_dir: Path, tmp_path: Path, args: l
     assert not out.exists()
 
 
+def test_unreachable_scheduler_is_one_line_and_writes_nothing(
+    spec_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """--scheduler naming an address where no scheduler listens: one line naming it, exit 2,
+    nothing at --out (the connection timeout shortened from 20 s to 1 s for the test)."""
+    from bench_sim.experiments import execution
+
+    monkeypatch.setitem(execution.open_client.__wrapped__.__kwdefaults__, "connect_timeout_s", 1.0)
+    with socket.socket() as sock:  # a free port: nothing listens there
+        sock.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{sock.getsockname()[1]}"
+    out = tmp_path / "o"
+    result = CliRunner().invoke(app, ["sweep", str(spec_dir / "lights.toml"), "--out", str(out),
+                                      "--scheduler", address])
+    assert result.exit_code == 2
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert len(lines) == 1, result.output
+    assert lines[0].startswith(f"bench-sim: error: --scheduler = '{address}': cannot reach a Dask scheduler")
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
 # --- runs ---------------------------------------------------------------------------------------
 
 

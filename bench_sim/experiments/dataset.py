@@ -30,6 +30,7 @@ Steps of :func:`run_dataset`:
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -544,29 +545,31 @@ def run_dataset(
     )
     run = DatasetRun(out=out, samples=spec.samples)
 
-    if action == "create":
-        _lay_out(spec, out)
-    meta = _manifest_meta(spec)
-    (out / COMPLETION_RECORD).unlink(missing_ok=True)  # rewritten last if the dataset completes
-    if not todo:
-        run.complete = len(done_before)
-    else:
-        tasks = [
-            SampleTask(i, planned[i], spec.stages, sample_streams(spec.seed, i)[1]) for i in todo
-        ]
-        writer = _SampleWriter(out, spec, values, meta)
-        bar = _progress(progress, len(todo), spec.samples - len(todo))
-        try:
-            with open_client(workers=workers, scheduler=scheduler) as client:
+    # the execution layer first: a scheduler that cannot be reached (or a cluster that cannot
+    # start) is refused before anything is laid out at --out
+    with open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext() as client:
+        if action == "create":
+            _lay_out(spec, out)
+        meta = _manifest_meta(spec)
+        (out / COMPLETION_RECORD).unlink(missing_ok=True)  # rewritten last if the dataset completes
+        if not todo:
+            run.complete = len(done_before)
+        else:
+            tasks = [
+                SampleTask(i, planned[i], spec.stages, sample_streams(spec.seed, i)[1]) for i in todo
+            ]
+            writer = _SampleWriter(out, spec, values, meta)
+            bar = _progress(progress, len(todo), spec.samples - len(todo))
+            try:
                 run_tasks(make_sample, tasks, client=client, indices=todo, keep_values=False,
                           on_result=lambda o: (writer.write(o), bar(o)))
-        except BaseException:
-            _write_manifest(out, spec, meta, values)  # what is on disk now (Ctrl-C, lost scheduler)
-            raise
-        finally:
-            bar(None)
-        run.ran, run.failed = writer.ran, writer.failed
-        run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
+            except BaseException:
+                _write_manifest(out, spec, meta, values)  # what is on disk now (Ctrl-C, lost scheduler)
+                raise
+            finally:
+                bar(None)
+            run.ran, run.failed = writer.ran, writer.failed
+            run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
     df = _write_manifest(out, spec, meta, values)
     write_card(out, spec, df, command=command, provenance=meta)
     if run.complete == spec.samples:
