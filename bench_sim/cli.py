@@ -350,19 +350,24 @@ def simulate(
     run_simulate(config, stages=stages, seed=seed, out=out, fmt=fmt)
 
 
+#: the execution layer of ``dataset`` and ``sweep`` (bench_sim.experiments.execution.open_client)
+WorkersOption = Annotated[
+    int | None,
+    typer.Option("--workers", help="worker processes of a local Dask cluster (default: the cores; "
+                 "0: run in this process)"),
+]
+SchedulerOption = Annotated[
+    str | None, typer.Option("--scheduler", help="address of a running Dask scheduler, tcp://HOST:PORT")
+]
+
+
 @app.command()
 @_user_errors
 def dataset(
     spec: Annotated[Path, typer.Argument(help="dataset spec (TOML), e.g. scenes/datasets/example.toml")],
     out: Annotated[Path, typer.Option("--out", help="dataset folder")],
-    workers: Annotated[
-        int | None,
-        typer.Option("--workers", help="worker processes of a local Dask cluster (default: the cores; "
-                     "0: this process)"),
-    ] = None,
-    scheduler: Annotated[
-        str | None, typer.Option("--scheduler", help="address of a running Dask scheduler (tcp://HOST:PORT)")
-    ] = None,
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="complete a stopped run: skip complete samples, redo the rest")
     ] = False,
@@ -389,14 +394,8 @@ def dataset(
 def sweep(
     spec: Annotated[Path, typer.Argument(help="sweep spec (TOML): base config, [[parameters]], mode, seed")],
     out: Annotated[Path, typer.Option("--out", help="output folder")],
-    workers: Annotated[
-        int | None,
-        typer.Option("--workers", help="worker processes of a local Dask cluster (default: the cores; 0: "
-                     "run in this process)"),
-    ] = None,
-    scheduler: Annotated[
-        str | None, typer.Option("--scheduler", help="address of a running Dask scheduler, tcp://HOST:PORT")
-    ] = None,
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="finish a killed sweep: skip its finished points")
     ] = False,

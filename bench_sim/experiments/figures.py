@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from bench_sim.io import write_figure_png
+from bench_sim.io import write_figure_png, write_png
 
 __all__ = [
     "stage_display", "fig3_stages", "fig4_hdr", "snr_versus_signal_figure", "Box", "import_in_background"
@@ -67,7 +67,6 @@ def fig3_stages(
     import matplotlib.pyplot as plt
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from bench_sim.io import write_png
     from bench_sim.rig.target_sources import area_resize
 
     n = len(order)
