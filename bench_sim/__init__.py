@@ -16,7 +16,7 @@ __all__ = ["__version__", "simulate"]
 
 def __getattr__(name: str):  # lazy: importing bench_sim stays cheap
     if name == "simulate":
-        from bench_sim.experiments.simulate import simulate
+        from bench_sim.workflows.simulate import simulate
 
         return simulate
     raise AttributeError(f"module 'bench_sim' has no attribute {name!r}")

@@ -241,9 +241,9 @@ def doctor() -> None:
     """Print the chosen Mitsuba variant, the LLVM library and why, memory, and versions.
 
     A variant forced by ``BENCH_SIM_VARIANT`` that cannot run here is one line, exit status 2."""
-    from bench_sim.backend import choose_backend, versions
+    from bench_sim.runtime.backend import choose_backend, versions
     from bench_sim.io import format_bytes
-    from bench_sim.resources import available_memory_bytes
+    from bench_sim.runtime.resources import available_memory_bytes
 
     choice = choose_backend()
     print(f"variant     : {choice.variant} ({choice.kind})")
@@ -269,7 +269,7 @@ def render(
 ) -> None:
     """Render per-row exposures (photons per pixel per frame) to DIR/exposures.exr + meta.json."""
     from bench_sim.config import load_config
-    from bench_sim.experiments.render_job import run_render
+    from bench_sim.workflows.render import run_render
 
     run_render(load_config(config), frames=frames, engine=engine, seed=seed, out=out)
 
@@ -283,8 +283,8 @@ def ptc(
 ) -> None:
     """Photon-transfer series through the sensor and DTDI: EMVA 1288 files and results."""
     from bench_sim.config import load_config
-    from bench_sim.experiments.ptc import run_ptc
-    from bench_sim.experiments.simulate import parse_stages_arg
+    from bench_sim.measure.ptc import run_ptc
+    from bench_sim.workflows.simulate import parse_stages_arg
 
     cfg = load_config(config)
     run_ptc(cfg, stages=list(parse_stages_arg(stages, cfg.sensor.rows)), seed=seed, out=out)
@@ -312,7 +312,7 @@ def fuse(
     ] = 0.0,
 ) -> None:
     """Fuse two stage images with the paper's rule (eq. 11)."""
-    from bench_sim.experiments.fuse_files import fuse_files
+    from bench_sim.workflows.fuse import fuse_files
 
     fuse_files(
         low, high, mu1=mu1, mu2=mu2, beta=beta, out=out, tra=tra, tra_method=tra_method,
@@ -329,7 +329,7 @@ def reproduce(
 ) -> None:
     """Reproduce the paper end to end: Fig. 3, Fig. 4, Table 1, DR analysis, report."""
     from bench_sim.config import load_config
-    from bench_sim.experiments.reproduce import run_reproduce
+    from bench_sim.workflows.reproduce.run import run_reproduce
 
     cfg = load_config(config)
     run_reproduce(cfg, seed=seed, out=out, quick=quick)
@@ -345,12 +345,12 @@ def simulate(
 ) -> None:
     """Any bench to its DTDI stage images with exact ground truth (dn, mean_dn, photons,
     reflectance, clipped, hdr): DIR/simulation.zarr, simulation.nc, or TIFFs + meta.json."""
-    from bench_sim.experiments.simulate import run_simulate
+    from bench_sim.workflows.simulate import run_simulate
 
     run_simulate(config, stages=stages, seed=seed, out=out, fmt=fmt)
 
 
-#: the execution layer of ``dataset`` and ``sweep`` (bench_sim.experiments.execution.open_client)
+#: the execution layer of ``dataset`` and ``sweep`` (bench_sim.runtime.execution.open_client)
 WorkersOption = Annotated[
     int | None,
     typer.Option("--workers", help="worker processes of a local Dask cluster (default: the cores; "
@@ -377,7 +377,7 @@ def dataset(
 ) -> None:
     """Synthetic validation dataset: many samples with exact ground truth, sharded per sample in
     DIR/data.zarr, a manifest, a dataset card; resumable, on Dask."""
-    from bench_sim.experiments.dataset import main_summary, run_dataset
+    from bench_sim.workflows.dataset.run import main_summary, run_dataset
 
     command = f"bench-sim dataset {spec} --out {out}"  # what remakes it (workers change nothing)
     run = run_dataset(
@@ -403,7 +403,7 @@ def sweep(
 ) -> None:
     """Scenario study: one simulation pass per point of a parameter sweep, on Dask:
     DIR/points.csv, sweep.nc, plots/, sweep.json, report.md."""
-    from bench_sim.experiments.sweep import run_sweep
+    from bench_sim.workflows.sweep.run import run_sweep
 
     run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, plots=plots)
 

@@ -31,8 +31,8 @@ import time
 from pathlib import Path
 
 from bench_sim.config import SCENES_DIR
-from bench_sim.experiments.dataset import bytes_per_sample, run_dataset
-from bench_sim.experiments.execution import open_client
+from bench_sim.workflows.dataset.run import bytes_per_sample, run_dataset
+from bench_sim.runtime.execution import open_client
 
 EXAMPLE = SCENES_DIR / "datasets" / "example.toml"
 
@@ -62,8 +62,8 @@ def _run(client, spec: Path, out: Path) -> float:
 
 def _rss_series(samples: int) -> None:
     """Resident memory of one process making ``samples`` samples of the example in a row."""
-    from bench_sim.experiments.dataset import SampleTask, make_sample
-    from bench_sim.experiments.dataset_spec import load_spec, sample_streams
+    from bench_sim.workflows.dataset.run import SampleTask, make_sample
+    from bench_sim.workflows.dataset.spec import load_spec, sample_streams
 
     with tempfile.TemporaryDirectory() as tmp:
         spec = load_spec(_spec(Path(tmp), samples))

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
-from bench_sim.experiments.chain_dr import measure_chain_dynamic_range
+from bench_sim.measure.chain_dr import measure_chain_dynamic_range
 from bench_sim.fusion import (
     TRA_METHODS,
     fuse_dtdi_hdr_eq11,

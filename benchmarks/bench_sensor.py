@@ -30,10 +30,10 @@ from collections.abc import Iterator
 import numpy as np
 
 from bench_sim.config import DTDIConfig, SensorConfig
-from bench_sim.parallel import thread_count
+from bench_sim.runtime.parallel import thread_count
 from bench_sim.sensor.dtdi import DTDIAccumulator, frames_needed
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, pixel_saturation_dn
-from bench_sim.sensor.pipeline import DEFAULT_CHUNK_FRAMES, iter_sensor_dtdi
+from bench_sim.sensor.stream import DEFAULT_CHUNK_FRAMES, iter_sensor_dtdi
 
 ROWS, COLS, LINES = 100, 1024, 1024
 T_INT_S = 100e-6

@@ -5,7 +5,7 @@ steps of ``reproduce``, and its peak memory at two numbers of lines.
    {10, 80}, truth included (``mean_dn``, ``photons``, ``reflectance``, ``clipped``, ``hdr``),
    against the pass ``reproduce`` made before it ran through ``simulate``: render set-up, every
    frame rendered and streamed through the sensor and DTDI for its 21 stages
-   (:func:`bench_sim.sensor.pipeline.sensor_dtdi_pass`). Prints the ratio (target <= 1).
+   (:func:`bench_sim.sensor.stream.sensor_dtdi_pass`). Prints the ratio (target <= 1).
 2. Memory: peak of numpy's allocations (``tracemalloc``; Mitsuba's own buffers are not seen)
    of ``simulate`` with stages {10, 80} at two line counts, split into what grows with the
    lines: the requested stage images (dataset), and the texels the render's run texture holds
@@ -24,15 +24,15 @@ import tracemalloc
 import numpy as np
 
 from bench_sim.config import load_config, with_overrides
-from bench_sim.experiments.reproduce import FIG3_STAGES
-from bench_sim.experiments.simulate import run_pass
+from bench_sim.workflows.reproduce.run import FIG3_STAGES
+from bench_sim.workflows.simulate import run_pass
 
 STAGES = (10, 80)
 
 
 def _reproduce_pass(cfg) -> float:
     from bench_sim.render.exposures import iter_photon_frames, prepare
-    from bench_sim.sensor.pipeline import sensor_dtdi_pass
+    from bench_sim.sensor.stream import sensor_dtdi_pass
 
     stages = sorted(set(FIG3_STAGES) | {cfg.fusion.mu1, cfg.fusion.mu2})
     rng = np.random.default_rng(0)

@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # Dr.Jit 1.5's LLVM backend aborts the process with Debian 12's libLLVM 15/16 ("Cannot select:
-# fminimum"); libLLVM 19 works. bench_sim.backend finds and probes it at run time.
+# fminimum"); libLLVM 19 works. bench_sim.runtime.backend finds and probes it at run time.
 if ! ls /usr/lib/*-linux-gnu/libLLVM.so.19* >/dev/null 2>&1 \
    && ! ls /usr/lib/*-linux-gnu/libLLVM-19.so* >/dev/null 2>&1; then
   SUDO=""

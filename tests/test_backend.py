@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from bench_sim import backend
-from bench_sim.backend import ProbeResult, choose_backend, probe_llvm, variant_for
+from bench_sim.runtime import backend
+from bench_sim.runtime.backend import ProbeResult, choose_backend, probe_llvm, variant_for
 
 
 def _fake_proc(returncode: int, stdout: str = "", stderr: str = ""):
@@ -174,7 +174,7 @@ def test_unknown_or_mismatched_variant_names(name, mode, needle):
 
 def test_installed_variants_are_read_without_importing_mitsuba():
     code = (
-        "import sys\nfrom bench_sim.backend import mitsuba_variants\n"
+        "import sys\nfrom bench_sim.runtime.backend import mitsuba_variants\n"
         "print(mitsuba_variants(), 'mitsuba' in sys.modules)"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import bench_sim.dataset as bds
+import bench_sim.workflows.dataset.reader as bds
 from bench_sim.config import DEFAULT_CONFIG_PATH, config_from_dict, config_sha256, with_overrides
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.dataset import run_dataset
+from bench_sim.workflows.dataset.run import run_dataset
 from tests.conftest import subpixel_shift
 
 #: a 12 x 48 sensor on the paper rig, 32 lines, stages 2 and 8 (fused)
@@ -263,7 +263,7 @@ def test_manifest_row_reproduces_its_sample(reference):
     values, the documented stream ``SeedSequence(seed, spawn_key=(i, 1))``) and run it."""
     import pandas as pd
 
-    from bench_sim.experiments.simulate import run_pass
+    from bench_sim.workflows.simulate import run_pass
 
     spec, ref = reference
     info = json.loads((ref / bds.DATASET_JSON).read_text())
@@ -358,7 +358,7 @@ def test_unreachable_scheduler_is_one_line_and_writes_nothing(tmp_path, monkeypa
     from typer.testing import CliRunner
 
     from bench_sim.cli import app
-    from bench_sim.experiments import execution
+    from bench_sim.runtime import execution
 
     monkeypatch.setitem(execution.open_client.__wrapped__.__kwdefaults__, "connect_timeout_s", 1.0)
     with socket.socket() as sock:  # a free port: nothing listens there

@@ -21,7 +21,7 @@ from bench_sim.sensor.dtdi import (
     run_dtdi,
 )
 from bench_sim.sensor.emva import draw_fixed_pattern, expose, pixel_mean_var_dn
-from bench_sim.sensor.pipeline import sensor_dtdi_pass
+from bench_sim.sensor.stream import sensor_dtdi_pass
 from tests.conftest import ALL_OFF
 
 T_INT_S = 100e-6

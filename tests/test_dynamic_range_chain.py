@@ -1,4 +1,4 @@
-"""Measured DR through sensor -> DTDI -> eq. 11 fusion (bench_sim.experiments.chain_dr)."""
+"""Measured DR through sensor -> DTDI -> eq. 11 fusion (bench_sim.measure.chain_dr)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from bench_sim.config import BenchConfig, with_overrides
-from bench_sim.experiments.chain_dr import ChainDR, measure_chain_dynamic_range
-from bench_sim.experiments.uniform_field import (
+from bench_sim.measure.chain_dr import ChainDR, measure_chain_dynamic_range
+from bench_sim.measure.uniform_field import (
     PEDESTAL_SIGMAS,
     expose_uniform,
     measurement_offsets_dn,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.execution import (
+from bench_sim.runtime.execution import (
     open_client,
     run_tasks,
     task_generator,

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from bench_sim.backend import init_mitsuba
+from bench_sim.runtime.backend import init_mitsuba
 from bench_sim.render.exposures import render_photons
 from bench_sim.render.radiometry import (
     airy_pixel_kernel,

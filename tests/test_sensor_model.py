@@ -24,7 +24,7 @@ from bench_sim.sensor.model import (
     stage_snr1_photons,
     stage_variance_dn2,
 )
-from bench_sim.sensor.pipeline import sensor_dtdi_pass
+from bench_sim.sensor.stream import sensor_dtdi_pass
 
 T_INT_S = 100e-6
 NO_FPN = {"prnu_enabled": False, "dsnu_enabled": False, "column_fpn": False}

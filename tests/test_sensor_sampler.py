@@ -127,7 +127,7 @@ def test_hybrid_sampler_matches_the_poisson_moments_on_electrons():
 def test_pass_is_the_same_with_one_and_two_threads(monkeypatch):
     """Every chunk of frames draws from its own stream: 1 or 2 threads, same stage words, same
     truth; a SeedSequence seed is the integer seed's stream."""
-    from bench_sim.experiments.simulate import run_pass
+    from bench_sim.workflows.simulate import run_pass
 
     cfg = tiny_cfg(lines=40)
     out = {}

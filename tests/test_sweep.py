@@ -19,8 +19,8 @@ from typer.testing import CliRunner
 
 from bench_sim.cli import app
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.sweep import plan_sweep, run_sweep
-from bench_sim.experiments.sweep_spec import load_spec
+from bench_sim.workflows.sweep.run import plan_sweep, run_sweep
+from bench_sim.workflows.sweep.spec import load_spec
 from bench_sim.metrics.banding import banding_amplitude, folded_cycles_per_line
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -194,7 +194,7 @@ def test_unreachable_scheduler_is_one_line_and_writes_nothing(
 ) -> None:
     """--scheduler naming an address where no scheduler listens: one line naming it, exit 2,
     nothing at --out (the connection timeout shortened from 20 s to 1 s for the test)."""
-    from bench_sim.experiments import execution
+    from bench_sim.runtime import execution
 
     monkeypatch.setitem(execution.open_client.__wrapped__.__kwdefaults__, "connect_timeout_s", 1.0)
     with socket.socket() as sock:  # a free port: nothing listens there
@@ -361,7 +361,7 @@ def test_a_failed_point_is_recorded_and_the_sweep_goes_on(
 ) -> None:
     """A point that raises is written with its one-line error and empty metrics; the others
     finish, the outputs hold them all, and --resume runs the failed point alone."""
-    from bench_sim.experiments import sweep
+    from bench_sim.workflows.sweep import run as sweep
 
     real = sweep.measure_point
 

@@ -5,7 +5,7 @@ the DTDI sum of ``m`` pixel reads, black offset subtracted, clipped to the ``bet
 ``0 .. 2**beta - 1`` (paper eq. 1-4; ``Phi_FS`` and the word's clip value come from
 :mod:`bench_sim.sensor.model`, the one place ``beta`` is validated). Values may be integers or
 floats (averaged images are fine); file-level checks (integer values, range) live in
-:mod:`bench_sim.experiments.fuse_files`.
+:mod:`bench_sim.workflows.fuse`.
 """
 
 from __future__ import annotations

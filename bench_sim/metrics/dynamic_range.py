@@ -9,7 +9,7 @@ stage pair (5, 100) of Fig. 3 (:func:`stage_pairs_for_db` finds such pairs).
 
 The *measured* (EMVA 1288 style) dynamic range of an image type, ``20 lg(mu_p.sat / mu_p.min)``
 from a photon-transfer series, is :func:`bench_sim.metrics.emva1288.dynamic_range_from_series`;
-:mod:`bench_sim.experiments.chain_dr` runs the series through the whole chain for
+:mod:`bench_sim.measure.chain_dr` runs the series through the whole chain for
 ``Gamma1``, ``Gamma2`` and ``Gamma_HDR``.
 
 References

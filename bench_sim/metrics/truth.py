@@ -2,7 +2,7 @@
 
 A simulation carries, for every pixel, the word the camera outputs (``dn``), its exact
 expectation (``mean_dn``), the photons behind it (``photons``) and whether a read or the word
-clipped (``clipped``); see :mod:`bench_sim.experiments.simulate`. With the expectation known, the
+clipped (``clipped``); see :mod:`bench_sim.workflows.simulate`. With the expectation known, the
 temporal noise of a single image is measured directly: ``dn - mean_dn`` (no image pair needed,
 unlike EMVA 1288's two-image method in :mod:`bench_sim.metrics.snr`).
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.parallel import parallel_map, thread_count
+from bench_sim.runtime.parallel import parallel_map, thread_count
 from bench_sim.render.records import (
     REFERENCE_IRRADIANCE_W_M2,
     light_power_w_m2,

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from bench_sim.backend import BackendChoice, init_mitsuba
+from bench_sim.runtime.backend import BackendChoice, init_mitsuba
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.engines import FastEngine, ReferenceEngine, check_fast_engine_valid

@@ -15,7 +15,7 @@ from bench_sim.sensor.dtdi import (
     stage_mean_var_dn,
 )
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, expose, pixel_mean_var_dn
-from bench_sim.sensor.pipeline import iter_sensor_dtdi, sensor_dtdi_pass
+from bench_sim.sensor.stream import iter_sensor_dtdi, sensor_dtdi_pass
 
 __all__ = [
     "FixedPattern",

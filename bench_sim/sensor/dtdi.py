@@ -35,7 +35,7 @@ accumulate), or left in, in which case stage ``m`` carries ``m * b``. Rounding o
 non-integer input (the sensor's ``quantization`` switched off) or a non-integer black offset.
 ``pedestal`` (one value, or one per stage) is a constant added after the sum and kept in the
 word: the configured ``dtdi.pedestal_dn`` (default 64 DN, the default of
-:func:`bench_sim.sensor.pipeline.sensor_dtdi_pass`; the low-level functions here default to 0,
+:func:`bench_sim.sensor.stream.sensor_dtdi_pass`; the low-level functions here default to 0,
 the paper's plain word). It keeps the dark signal's noise above 0 DN, so the word does not clip
 it and dark statistics stay unbiased (EMVA 1288 also requires an unclipped dark signal); every
 consumer subtracts it (:func:`bench_sim.sensor.model.stage_offset_dn`). The sum is

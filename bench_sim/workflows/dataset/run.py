@@ -1,9 +1,9 @@
 """``bench-sim dataset``: synthetic validation datasets with exact ground truth, sample by sample
 on Dask, resumable.
 
-A spec (:mod:`bench_sim.experiments.dataset_spec`) names a bench, a number of samples, a root
+A spec (:mod:`bench_sim.workflows.dataset.spec`) names a bench, a number of samples, a root
 seed, the stages to store, the output size and the config keys to randomise. Sample ``i`` is one
-:func:`bench_sim.experiments.simulate.run_pass` of its own bench (parameters drawn from its own
+:func:`bench_sim.workflows.simulate.run_pass` of its own bench (parameters drawn from its own
 stream), with its own simulation stream: its content depends only on (spec, seed, ``i``), never
 on the number of workers or the order in which samples finish.
 
@@ -13,10 +13,10 @@ Steps of :func:`run_dataset`:
    the output folder (new, empty, a complete dataset to replace, or, with ``--resume`` /
    ``--only``, the same dataset), and the size of what is left to write against the free disk
    space (:func:`estimate_bytes`). Each refusal is one line.
-2. **Lay out** ``DIR`` (:mod:`bench_sim.dataset` lists the files): ``dataset.json`` and an
+2. **Lay out** ``DIR`` (:mod:`bench_sim.workflows.dataset.reader` lists the files): ``dataset.json`` and an
    empty ``data.zarr`` with the full schema are made in a temporary folder and renamed into
    place.
-3. **Run** the samples on the execution layer (:mod:`bench_sim.experiments.execution`: a
+3. **Run** the samples on the execution layer (:mod:`bench_sim.runtime.execution`: a
    ``LocalCluster`` or ``--scheduler``). Workers return arrays; this process writes each
    sample's chunks into ``data.zarr`` as it completes and only then its record
    ``samples/NNNNNNNN.json`` (status ``complete``). A killed run leaves at worst a sample whose
@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
-from bench_sim.dataset import (
+from bench_sim.workflows.dataset.reader import (
     COMPLETION_RECORD,
     DATA_STORE,
     DATASET_JSON,
@@ -63,7 +63,7 @@ if TYPE_CHECKING:
     import pandas as pd
     import xarray as xr
 
-    from bench_sim.experiments.dataset_spec import DatasetSpec
+    from bench_sim.workflows.dataset.spec import DatasetSpec
 
 __all__ = [
     "SampleTask",
@@ -102,8 +102,8 @@ class SampleOutput:
     Attributes
     ----------
     arrays
-        Variable -> array: ``(stage, line, column)`` for :data:`~bench_sim.dataset.STAGE_VARIABLES`,
-        ``(line, column)`` for :data:`~bench_sim.dataset.FUSED_VARIABLES`.
+        Variable -> array: ``(stage, line, column)`` for :data:`~bench_sim.workflows.dataset.reader.STAGE_VARIABLES`,
+        ``(line, column)`` for :data:`~bench_sim.workflows.dataset.reader.FUSED_VARIABLES`.
     metrics
         :func:`sample_metrics`.
     info
@@ -147,7 +147,7 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
 def make_sample(task: SampleTask) -> SampleOutput:
     """Make one sample (runs in a worker): one pass with truth, its arrays and metrics."""
     from bench_sim.config import config_sha256
-    from bench_sim.experiments.simulate import run_pass
+    from bench_sim.workflows.simulate import run_pass
 
     res = run_pass(task.config, task.stages, np.random.default_rng(task.stream), truth=True)
     ds = res.dataset
@@ -196,7 +196,7 @@ def _folder_state(out: Path) -> str:
 
 
 def _schema(spec: DatasetSpec) -> dict[str, Any]:
-    from bench_sim.experiments.simulate import VARIABLES
+    from bench_sim.workflows.simulate import VARIABLES
 
     lines, cols, n_st = spec.base.lines, spec.base.sensor.columns, len(spec.stages)
     variables: dict[str, Any] = {}
@@ -218,7 +218,7 @@ def _schema(spec: DatasetSpec) -> dict[str, Any]:
 
 def _info(spec: DatasetSpec) -> dict[str, Any]:
     """The content of ``dataset.json``."""
-    from bench_sim.experiments.provenance import provenance
+    from bench_sim.runtime.provenance import provenance
 
     try:
         spec_file = os.path.relpath(spec.path)
@@ -259,7 +259,7 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
     import dask.array as da
     import xarray as xr
 
-    from bench_sim import __version__
+    from bench_sim.version import __version__
     from bench_sim.config import config_sha256, config_to_toml_text
     from bench_sim.io import write_json
 
@@ -333,7 +333,7 @@ def _umask() -> int:
 def _check_folder(spec: DatasetSpec, out: Path, *, reuse: bool) -> str:
     """Decide what to do with ``out`` before anything runs: ``create`` (lay out a new dataset,
     replacing an empty folder or a replaceable dataset) or ``reuse`` (the same dataset)."""
-    from bench_sim import __version__
+    from bench_sim.version import __version__
     from bench_sim.io import check_output_dir
 
     state = _folder_state(out)
@@ -500,7 +500,7 @@ def run_dataset(
         The dataset folder: new or empty; a complete dataset (or one without any sample yet),
         replaced; with ``resume`` or ``only``, the same dataset, reused.
     workers, scheduler
-        Where the samples run (:func:`bench_sim.experiments.execution.open_client`: ``workers``
+        Where the samples run (:func:`bench_sim.runtime.execution.open_client`: ``workers``
         processes of a local cluster, ``0`` for this process, or a scheduler's address).
     resume
         Skip the complete samples, redo the others (failed, half-written, not started).
@@ -511,10 +511,10 @@ def run_dataset(
     command
         The command line, for the dataset card.
     """
-    from bench_sim.experiments.dataset_card import write_card
-    from bench_sim.experiments.dataset_spec import check_sample_configs, load_spec, sample_streams
-    from bench_sim.experiments.execution import open_client, run_tasks
-    from bench_sim.experiments.preflight import preflight_tasks
+    from bench_sim.workflows.dataset.card import write_card
+    from bench_sim.workflows.dataset.spec import check_sample_configs, load_spec, sample_streams
+    from bench_sim.runtime.execution import open_client, run_tasks
+    from bench_sim.workflows.preflight import preflight_tasks
     from bench_sim.io import check_free_space, format_bytes, write_json
 
     t_start = time.perf_counter()
@@ -582,7 +582,7 @@ def run_dataset(
 
 
 def _manifest_meta(spec: DatasetSpec) -> dict[str, Any]:
-    from bench_sim import __version__
+    from bench_sim.version import __version__
     from bench_sim.config import config_sha256
 
     return {

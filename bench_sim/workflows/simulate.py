@@ -4,7 +4,7 @@ exact ground truth behind every pixel, in one streaming pass.
 One pass renders the frames ``0 .. L + max(stages) - 2`` (``L = config.lines``), exposes the
 rows ``0 .. max(stages) - 1`` of the sensor (EMVA 1288 model, :mod:`bench_sim.sensor.emva`),
 accumulates every requested stage (paper eq. 1-2, 4) and, from the same frames and the same
-physical sensor, the truth (:mod:`bench_sim.render.stage_truth`). The result is an
+physical sensor, the truth (:mod:`bench_sim.sensor.stage_truth`). The result is an
 :class:`xarray.Dataset` with dimensions ``stage``, ``line``, ``column``:
 
 =============== ======================================================================
@@ -23,7 +23,7 @@ drawn in a fixed order (render seed, fixed pattern, then the seed of the tempora
 which every chunk of frames spawns its own stream), so the same config and seed give identical
 data with any number of threads; ``reproduce`` runs its pass through :func:`run_pass` with its
 own generator. Rendering runs a chunk ahead in its own thread and the chunks of frames are
-exposed on the thread pool (:mod:`bench_sim.parallel`) while the stages accumulate in order.
+exposed on the thread pool (:mod:`bench_sim.runtime.parallel`) while the stages accumulate in order.
 """
 
 from __future__ import annotations
@@ -183,18 +183,18 @@ def run_pass(
         draw from, consumed in this order: one integer for the renderer (reference engine),
         the sensor's fixed pattern, then one ``SeedSequence`` of the temporal noise, from which
         chunk ``c`` of :data:`SENSOR_CHUNK_FRAMES` frames (rows ``0 .. max(stages) - 1``) gets
-        its own generator (:func:`bench_sim.parallel.chunk_generator`): the result does not
+        its own generator (:func:`bench_sim.runtime.parallel.chunk_generator`): the result does not
         depend on the number of threads (``BENCH_SIM_THREADS``).
     truth
         Also compute ``mean_dn``, ``photons``, ``reflectance`` and ``clipped``.
     on_frames
         Called with the number of frames after every rendered chunk (progress bars).
     """
-    from bench_sim import __version__
+    from bench_sim.version import __version__
     from bench_sim.config import config_sha256, config_to_toml_text
-    from bench_sim.parallel import prefetch, seed_sequence
+    from bench_sim.runtime.parallel import prefetch, seed_sequence
     from bench_sim.render.exposures import iter_photon_frames, prepare
-    from bench_sim.render.stage_truth import (
+    from bench_sim.sensor.stage_truth import (
         StageSums,
         reflectance_rows,
         row_footprints,
@@ -205,7 +205,7 @@ def run_pass(
     from bench_sim.sensor.dtdi import DTDIAccumulator, frames_needed, full_scale_dn
     from bench_sim.sensor.emva import draw_fixed_pattern
     from bench_sim.sensor.model import word_dtype
-    from bench_sim.sensor.pipeline import iter_exposed
+    from bench_sim.sensor.stream import iter_exposed
 
     st = check_stages(stages, cfg.sensor.rows)
     rng = np.random.default_rng(seed)  # a Generator is used as is
@@ -393,7 +393,7 @@ def simulate(
     """
     cfg = resolve_config(config)
     st = check_stages(stages, cfg.sensor.rows)
-    from bench_sim.experiments.preflight import check_seed
+    from bench_sim.workflows.preflight import check_seed
 
     seed = check_seed(seed, "seed")
     check_inputs(cfg, st)
@@ -419,10 +419,10 @@ def check_inputs(
 ) -> None:
     """Check everything a pass needs besides the config itself before any rendering: the target
     image file and, given the ``stages``, the output folder (if any), the memory and disk of the
-    run and the backend (:func:`bench_sim.experiments.preflight.preflight`); raises
+    run and the backend (:func:`bench_sim.workflows.preflight.preflight`); raises
     :class:`BenchSimError` (one line)."""
-    from bench_sim.experiments.preflight import preflight
-    from bench_sim.resources import estimate_simulate
+    from bench_sim.workflows.preflight import preflight
+    from bench_sim.runtime.resources import estimate_simulate
 
     if stages is None:  # the inputs alone
         preflight(cfg, out=None, estimate=None, render=False)
@@ -515,8 +515,8 @@ def run_simulate(
     any rendering; nothing is written unless the whole set is complete.
     """
     from bench_sim.config import load_config
-    from bench_sim.experiments.preflight import check_seed
-    from bench_sim.experiments.provenance import provenance
+    from bench_sim.workflows.preflight import check_seed
+    from bench_sim.runtime.provenance import provenance
     from bench_sim.io import output_set
 
     if fmt not in FORMATS:

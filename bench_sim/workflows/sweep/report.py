@@ -4,7 +4,7 @@
     One tidy row per point: ``point``, the swept keys (lists as JSON), ``varied`` (sequential
     mode), ``seed`` and ``stream`` (the point's ``SeedSequence(seed).spawn(..)[stream]``),
     ``config_sha256``, ``status`` (``ok`` | ``failed``), ``error`` (one line), the metrics
-    (:data:`bench_sim.experiments.sweep.COLUMNS`, then one banding column per flickering light
+    (:data:`bench_sim.workflows.sweep.run.COLUMNS`, then one banding column per flickering light
     and stage), ``wall_s`` and ``worker``. ``#`` lines on top carry the provenance and the units
     of every column (``pandas.read_csv(path, comment="#")``).
 ``sweep.nc``
@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from bench_sim.experiments.sweep import SweepPlan
+    from bench_sim.workflows.sweep.run import SweepPlan
 
 __all__ = ["write_points_csv", "write_outputs", "points_table", "to_dataset", "PLOT_GROUPS"]
 
@@ -70,7 +70,7 @@ TAIL = ("wall_s", "worker")
 
 
 def _docs(plan: SweepPlan) -> dict[str, tuple[str, str, str]]:
-    from bench_sim.experiments.sweep import BANDING_DOC, COLUMNS
+    from bench_sim.workflows.sweep.run import BANDING_DOC, COLUMNS
 
     return {c: COLUMNS.get(c, BANDING_DOC) for c in plan.columns}
 
@@ -107,7 +107,7 @@ def points_table(
 
 
 def _csv_meta(plan: SweepPlan) -> dict[str, Any]:
-    from bench_sim.experiments.provenance import provenance
+    from bench_sim.runtime.provenance import provenance
 
     units = {c: u for c, (u, _k, _d) in _docs(plan).items()}
     units.update({"wall_s": "s", "seed": "1", "stream": "1"})
@@ -230,7 +230,7 @@ def to_dataset(
 
 
 def _version() -> str:
-    from bench_sim import __version__
+    from bench_sim.version import __version__
 
     return __version__
 

@@ -35,7 +35,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from bench_sim.errors import BenchSimError
-from bench_sim.parallel import child_sequence
+from bench_sim.runtime.parallel import child_sequence
 
 __all__ = [
     "TaskOutcome",

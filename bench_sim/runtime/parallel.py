@@ -8,7 +8,7 @@ others, and every random piece draws from its own generator, spawned from a
 bit-identical output with 1 or 16 threads.
 
 ``BENCH_SIM_THREADS`` sets the number of threads (default: the usable cores; the Dask workers of
-:mod:`bench_sim.experiments.execution` set it to 1, one core per worker). Scale-out over machines
+:mod:`bench_sim.runtime.execution` set it to 1, one core per worker). Scale-out over machines
 is Dask's job, not this module's.
 
 Pool

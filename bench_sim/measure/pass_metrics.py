@@ -1,11 +1,11 @@
-"""Metrics of one simulation pass (a :class:`~bench_sim.experiments.simulate.PassResult` and its
+"""Metrics of one simulation pass (a :class:`~bench_sim.workflows.simulate.PassResult` and its
 eq. 11 fusion): eq. 16-18 (omega of ``Gamma1``, ``Gamma2``, ``Gamma_HDR``), saturated fractions,
 the darkest and brightest wedge patches (spatial SNR, level, clipping) and the paper's
 qualitative claims. ``reproduce`` and ``sweep`` both report them.
 
 All of them are *scene-referred*: they depend on the lights and the target as much as on the
 camera (unlike the dynamic range measured through the chain,
-:mod:`bench_sim.experiments.chain_dr`). The darkest and brightest patches are the wedge steps
+:mod:`bench_sim.measure.chain_dr`). The darkest and brightest patches are the wedge steps
 (of either half of the ``paper`` target) with the lowest and highest mean ``Gamma_HDR``, i.e.
 as lit; other targets have no wedge and give ``None`` with the reason.
 """
@@ -88,7 +88,7 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
     cfg
         The bench of the pass.
     sim
-        The :class:`~bench_sim.experiments.simulate.PassResult` (stage words with their pedestal,
+        The :class:`~bench_sim.workflows.simulate.PassResult` (stage words with their pedestal,
         render set-up with the target panel and geometry).
     fused
         :func:`bench_sim.fusion.paper.fuse_dtdi_hdr_eq11` of the two stages, offsets removed.

@@ -62,7 +62,7 @@ __all__ = [
 ]
 
 #: The scenes shipped inside the package (``scenes/`` in a source checkout links here).
-SCENES_DIR = Path(__file__).resolve().parent / "scenes"
+SCENES_DIR = Path(__file__).resolve().parents[1] / "scenes"
 DEFAULT_CONFIG_PATH = SCENES_DIR / "paper_rig.toml"
 
 #: Bounds of the DTDI output word length ``beta`` [bits] (the one definition; see
@@ -612,7 +612,7 @@ class RenderConfig(_Section):
 
     @model_validator(mode="after")
     def _variant(self) -> RenderConfig:
-        from bench_sim.backend import check_variant_name
+        from bench_sim.runtime.backend import check_variant_name
 
         check_variant_name(self.variant, "spectral" if self.spectral else "mono", "variant")
         return self

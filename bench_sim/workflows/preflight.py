@@ -2,13 +2,13 @@
 
 In this order (cheap first): the output folder can receive an output set
 (:func:`bench_sim.io.check_output_dir`), the run fits in the memory and on the disk available
-(:func:`bench_sim.resources.check_resources` with the command's estimate), the target image
+(:func:`bench_sim.runtime.resources.check_resources` with the command's estimate), the target image
 file reads (``target.layout = "image"``), and the rendering backend chosen or forced can run
-(:func:`bench_sim.backend.select_backend`). Each failure is one
+(:func:`bench_sim.runtime.backend.select_backend`). Each failure is one
 :class:`~bench_sim.errors.BenchSimError` line; nothing has been written then.
 
 A new command calls :func:`preflight` with its config, its output folder and its
-:class:`~bench_sim.resources.ResourceEstimate`, then computes, then writes inside
+:class:`~bench_sim.runtime.resources.ResourceEstimate`, then computes, then writes inside
 :func:`bench_sim.io.output_set`. Commands that run many simulation tasks on the execution layer
 (sweeps, data sets) call :func:`preflight_tasks` with every task's config and stages.
 """
@@ -20,7 +20,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from bench_sim.config import BenchConfig
-from bench_sim.resources import ResourceEstimate, check_resources
+from bench_sim.runtime.resources import ResourceEstimate, check_resources
 
 __all__ = ["preflight", "preflight_tasks", "check_seed", "SEED_MAX"]
 
@@ -78,7 +78,7 @@ def preflight(
 
         check_target_image(cfg.target)
         if render:
-            from bench_sim.backend import select_backend
+            from bench_sim.runtime.backend import select_backend
 
             select_backend(cfg.render.variant, "spectral" if cfg.render.spectral else "mono")
     return out_path
@@ -96,15 +96,15 @@ def preflight_tasks(
 ) -> None:
     """Check a run of many simulation passes (sweep points, data-set samples) before any runs.
 
-    The largest task (one pass with its truth, :func:`bench_sim.resources.estimate_simulate`)
+    The largest task (one pass with its truth, :func:`bench_sim.runtime.resources.estimate_simulate`)
     times the worker processes that run at once on this machine
-    (:func:`bench_sim.resources.local_concurrency`; none with a ``scheduler``: the cluster's
+    (:func:`bench_sim.runtime.resources.local_concurrency`; none with a ``scheduler``: the cluster's
     machines run them) must fit in the memory available, and ``disk_bytes`` on the disk of
     ``out``; the target image and the backend (forced or chosen) are checked on the largest
     task's config (the backend only for local workers). The output folder itself is the
     caller's to check (resumable runs reuse theirs).
     """
-    from bench_sim.resources import check_resources, estimate_simulate, estimate_tasks, local_concurrency
+    from bench_sim.runtime.resources import check_resources, estimate_simulate, estimate_tasks, local_concurrency
 
     sized = [(estimate_simulate(cfg, stages), cfg) for cfg, stages in tasks]
     if not sized:

@@ -1,9 +1,9 @@
 """Uniform-field photon transfer through the real sensor and DTDI: the one runner behind
-``bench-sim ptc`` (:mod:`bench_sim.experiments.ptc`) and the whole-chain dynamic range
-(:mod:`bench_sim.experiments.chain_dr`).
+``bench-sim ptc`` (:mod:`bench_sim.measure.ptc`) and the whole-chain dynamic range
+(:mod:`bench_sim.measure.chain_dr`).
 
 A uniform field of ``mu_p`` photons per pixel per frame is exposed through the EMVA 1288 pixel
-model and the streaming DTDI accumulator (:func:`bench_sim.sensor.pipeline.sensor_dtdi_pass`,
+model and the streaming DTDI accumulator (:func:`bench_sim.sensor.stream.sensor_dtdi_pass`,
 one fixed pattern for the whole series). One pass of ``n L + max(stages) - 1`` frames over the
 top-left ``max(stages)`` rows x ``C`` columns gives, for every requested stage, ``n L`` complete
 lines: ``n`` images of ``L`` lines (consecutive line blocks). Every raw read (frame ``k``, row
@@ -40,7 +40,7 @@ from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.sensor.emva import FixedPattern
 from bench_sim.sensor.model import stage_dark_std_dn, stage_offset_dn, word_clip_dn
-from bench_sim.sensor.pipeline import sensor_dtdi_pass
+from bench_sim.sensor.stream import sensor_dtdi_pass
 
 __all__ = ["PEDESTAL_SIGMAS", "measurement_pedestal_dn", "measurement_offsets_dn", "expose_uniform"]
 

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bench_sim.dataset import (
+from bench_sim.workflows.dataset.reader import (
     CARD,
     COMPLETION_RECORD,
     DATA_STORE,
@@ -32,7 +32,7 @@ from bench_sim.dataset import (
 if TYPE_CHECKING:
     import pandas as pd
 
-    from bench_sim.experiments.dataset_spec import DatasetSpec
+    from bench_sim.workflows.dataset.spec import DatasetSpec
 
 __all__ = ["write_card", "write_thumbnails", "THUMBNAIL_SAMPLES"]
 
@@ -77,7 +77,7 @@ def write_thumbnails(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bench_sim.experiments.figures import stage_display
+    from bench_sim.workflows.reproduce.figures import stage_display
     from bench_sim.fusion.tonemap import tone_map
     from bench_sim.io import write_png
 
@@ -164,7 +164,7 @@ def write_card(
     provenance: dict[str, Any] | None = None,
 ) -> Path:
     """Write ``DIR/README.md`` and ``DIR/thumbnails.png`` for the dataset in ``out`` with
-    manifest ``df`` (:func:`bench_sim.experiments.dataset.manifest_frame`); ``provenance``
+    manifest ``df`` (:func:`bench_sim.workflows.dataset.run.manifest_frame`); ``provenance``
     (version, seed, hashes) goes into the PNG."""
     from bench_sim.io import format_bytes, write_text
 
@@ -262,10 +262,10 @@ def write_card(
     md += [
         "## How to load it", "",
         "```python",
-        "import bench_sim.dataset",
-        "ds = bench_sim.dataset.open(DIR)      # xarray.Dataset, lazy; manifest columns as coordinates",
+        "import bench_sim.workflows.dataset.reader",
+        "ds = bench_sim.workflows.dataset.reader.open(DIR)      # xarray.Dataset, lazy; manifest columns as coordinates",
         'ds.dn.sel(stage=80).isel(sample=0)     # one stage image; ds["lights.strong.irradiance_w_m2"] ...',
-        "for s in bench_sim.dataset.iter_samples(DIR):   # numpy only, one sample at a time",
+        "for s in bench_sim.workflows.dataset.reader.iter_samples(DIR):   # numpy only, one sample at a time",
         '    s.arrays["dn"], s.arrays["mean_dn"], s.values, s.metrics',
         "```", "",
         "Or with the libraries themselves: `xarray.open_zarr(DIR + '/data.zarr')` (keep the samples "

@@ -254,7 +254,7 @@ def pass_memory(
     terms.update(target_memory(cfg))
     texels = _texture_texels(cfg, frames)
     whole = texels * TEXTURE_BYTES_PER_TEXEL
-    chunk = 64  # frames rendered per chunk (bench_sim.experiments.simulate)
+    chunk = 64  # frames rendered per chunk (bench_sim.workflows.simulate)
     if name == "fast":
         # rasterised as the pass reaches it: the blocks a texture keeps, one block being
         # rasterised and a chunk's window (bench_sim.render.texture, bench_sim.render.engines)
@@ -370,7 +370,7 @@ def local_concurrency(workers: int | None, scheduler: str | None) -> int:
     if scheduler is not None:
         return 0
     if workers is None:
-        from bench_sim.experiments.execution import default_workers
+        from bench_sim.runtime.execution import default_workers
 
         return default_workers()
     return max(int(workers), 1)

@@ -24,7 +24,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, with_overrides
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.provenance import provenance, render_provenance
+from bench_sim.runtime.provenance import provenance, render_provenance
 
 __all__ = ["run_reproduce", "check_reproducible", "quick_config", "PAPER", "FIG3_STAGES", "QUICK_OVERRIDES"]
 
@@ -92,7 +92,7 @@ def check_reproducible(cfg: BenchConfig) -> None:
     ``sensor.columns`` image, stage words that fit its 16-bit TIFF files, and a word wide
     enough for the whole-chain DR measurement's pedestal. Raises :class:`BenchSimError` (one
     line) naming what to change."""
-    from bench_sim.experiments.pass_metrics import patch_slices
+    from bench_sim.measure.pass_metrics import patch_slices
     from bench_sim.rig.geometry import rig_geometry
     from bench_sim.rig.target import make_panel
 
@@ -107,7 +107,7 @@ def check_reproducible(cfg: BenchConfig) -> None:
             f"dtdi.beta_bits = {cfg.dtdi.beta_bits}: reproduce writes gamma1/gamma2 as {TIFF_BITS}-bit "
             f"TIFF; use beta_bits <= {TIFF_BITS} (bench-sim simulate writes any word)"
         )
-    from bench_sim.experiments.uniform_field import measurement_pedestal_dn
+    from bench_sim.measure.uniform_field import measurement_pedestal_dn
 
     ped = measurement_pedestal_dn(cfg, (cfg.fusion.mu1, cfg.fusion.mu2))  # the DR measurement's word
     _check_dr_measurable(cfg, ped)
@@ -166,14 +166,14 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     """Run the reproduction and write its outputs into ``out``. Returns ``metrics.json``'s dict."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from bench_sim.experiments.chain_dr import measure_chain_dynamic_range
-    from bench_sim.experiments.pass_metrics import pass_metrics
-    from bench_sim.experiments.preflight import check_seed, preflight
-    from bench_sim.experiments.simulate import run_pass
+    from bench_sim.measure.chain_dr import measure_chain_dynamic_range
+    from bench_sim.measure.pass_metrics import pass_metrics
+    from bench_sim.workflows.preflight import check_seed, preflight
+    from bench_sim.workflows.simulate import run_pass
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
     from bench_sim.fusion.tonemap import quantize_display, tone_map
     from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
-    from bench_sim.resources import estimate_reproduce
+    from bench_sim.runtime.resources import estimate_reproduce
     from bench_sim.sensor.model import stage_offset_dn
 
     seed = check_seed(seed)
@@ -189,7 +189,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     frames = lines + max(stages) - 1
     t_start = time.perf_counter()
     timer = _Timer()
-    from bench_sim.experiments.figures import import_in_background
+    from bench_sim.workflows.reproduce.figures import import_in_background
 
     import_in_background()  # ready when the figures are drawn
     rng = np.random.default_rng(seed)
@@ -288,7 +288,7 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         "engine": setup.info["engine"],
         "variant": setup.info["variant"],
     }
-    from bench_sim.experiments.report import write_report
+    from bench_sim.workflows.reproduce.report import write_report
     from bench_sim.io import output_set, write_json
 
     record = {"command": "reproduce", "quick": quick, "version": meta["version"], "seed": int(seed),
@@ -315,7 +315,7 @@ def _images(per_image: dict[str, Any]) -> dict[str, Any]:
 
 
 def _snr_figure(path: Path, chain_dr: Any, meta: dict[str, Any]) -> None:
-    from bench_sim.experiments.figures import snr_versus_signal_figure
+    from bench_sim.workflows.reproduce.figures import snr_versus_signal_figure
 
     names = {"gamma1": f"$\\Gamma_1$ (m = {chain_dr.mu1})", "gamma2": f"$\\Gamma_2$ (m = {chain_dr.mu2})",
              "hdr": "$\\Gamma_{HDR}$ (eq. 11)"}
@@ -344,9 +344,9 @@ def _write_outputs(
     panel: Any,
     lines: int,
 ) -> None:
-    from bench_sim.experiments.figures import fig3_stages, fig4_hdr, stage_display
+    from bench_sim.workflows.reproduce.figures import fig3_stages, fig4_hdr, stage_display
     from bench_sim.io import atomic_path, write_exr, write_png, write_tiff16
-    from bench_sim.parallel import start
+    from bench_sim.runtime.parallel import start
 
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
     g1, g2 = stage_images[mu1], stage_images[mu2]

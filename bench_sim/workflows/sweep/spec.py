@@ -42,7 +42,7 @@ Streams
 -------
 ``seed`` is the sweep's root: point ``i`` draws from
 ``numpy.random.SeedSequence(seed).spawn(n)[i]``
-(:func:`bench_sim.experiments.execution.task_seed_sequence`), so its result never depends on
+(:func:`bench_sim.runtime.execution.task_seed_sequence`), so its result never depends on
 the number of workers or on the order of completion. ``noise = "common"`` gives every point the
 stream of point 0 (paired comparisons: the differences between points are then not noise).
 """
@@ -301,7 +301,7 @@ def load_spec(path: str | Path) -> SweepSpec:
         raise _err(spec, f"base = {base_file!r}: needs a config file name")
     base_cfg = load_config((spec.parent / base_file).resolve() if base_file else None)
     if quick:
-        from bench_sim.experiments.reproduce import quick_config
+        from bench_sim.workflows.reproduce.run import quick_config
 
         base_cfg = quick_config(base_cfg)
     overrides = raw.get("overrides", {})

@@ -7,7 +7,7 @@ uniform field for the photon-transfer measurement) go through the EMVA 1288 pixe
 number of lines.
 
 Chunks of :data:`DEFAULT_CHUNK_FRAMES` frames are exposed on the thread pool
-(:mod:`bench_sim.parallel`, ``BENCH_SIM_THREADS``), chunk ``c`` with its own generator
+(:mod:`bench_sim.runtime.parallel`, ``BENCH_SIM_THREADS``), chunk ``c`` with its own generator
 ``chunk_generator(noise, c)`` spawned from one ``SeedSequence`` (``noise``) drawn from the run's
 generator, and accumulated in frame order: the stage images are the same for any number of
 threads.
@@ -24,7 +24,7 @@ import numpy as np
 
 from bench_sim.config import DTDIConfig, SensorConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.parallel import chunk_generator, ordered_imap, seed_sequence
+from bench_sim.runtime.parallel import chunk_generator, ordered_imap, seed_sequence
 from bench_sim.sensor.dtdi import DTDIAccumulator, collect_stage_lines, validate_stages
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, expose
 
@@ -88,8 +88,8 @@ def iter_exposed(
     *,
     saturated: bool = False,
 ) -> Iterator[Exposed]:
-    """Expose chunks of frames on the thread pool (:func:`bench_sim.parallel.ordered_imap`),
-    chunk ``c`` drawing from :func:`bench_sim.parallel.chunk_generator` ``(noise, c)``; yields
+    """Expose chunks of frames on the thread pool (:func:`bench_sim.runtime.parallel.ordered_imap`),
+    chunk ``c`` drawing from :func:`bench_sim.runtime.parallel.chunk_generator` ``(noise, c)``; yields
     them in order, a few chunks exposed ahead of the consumer. ``saturated``: also return the
     saturated reads (see :func:`bench_sim.sensor.emva.expose`)."""
 
@@ -185,7 +185,7 @@ def sensor_dtdi_pass(
     rng
         The run's random generator (or a seed for one). If ``fixed`` is None the fixed pattern
         is drawn from it first (:func:`draw_fixed_pattern` for the whole sensor); then one
-        ``SeedSequence`` of the temporal noise (:func:`bench_sim.parallel.seed_sequence`), from
+        ``SeedSequence`` of the temporal noise (:func:`bench_sim.runtime.parallel.seed_sequence`), from
         which chunk ``c`` of ``chunk_frames`` frames gets its own generator.
     fixed
         The sensor's fixed pattern (whole sensor or exactly ``R x C``).

@@ -2,26 +2,26 @@
 
 Plan -> run -> write:
 
-1. :func:`plan_sweep` reads the spec (:mod:`bench_sim.experiments.sweep_spec`: every key,
+1. :func:`plan_sweep` reads the spec (:mod:`bench_sim.workflows.sweep.spec`: every key,
    value and point config checked), checks every point's engine and input files, the output
    folder and ``--resume``; a problem is one line (exit 2) before any point runs, and nothing
    is written.
 2. :func:`run_sweep` runs the points still to do on ``dask.distributed``
-   (:mod:`bench_sim.experiments.execution`: a ``LocalCluster`` of ``--workers`` processes, or
+   (:mod:`bench_sim.runtime.execution`: a ``LocalCluster`` of ``--workers`` processes, or
    ``--scheduler ADDRESS``). Each point (:func:`measure_point`) runs the chain on its own
    stream -- ``simulate``'s pass with its truth, the eq. 11 fusion, the pass metrics
-   (:mod:`bench_sim.experiments.pass_metrics`), the measured dynamic range through the chain
-   (:mod:`bench_sim.experiments.chain_dr`) and the flicker banding per stage -- and returns one
+   (:mod:`bench_sim.measure.pass_metrics`), the measured dynamic range through the chain
+   (:mod:`bench_sim.measure.chain_dr`) and the flicker banding per stage -- and returns one
    flat record. A failed point is recorded with its one-line error and the sweep goes on.
 3. As each point completes, the client writes its record to ``points/NNNNNN.json`` and
    rewrites ``points.csv``; at the end ``sweep.nc``, ``plots/`` and ``report.md``
-   (:mod:`bench_sim.experiments.sweep_report`), and the completion record last.
+   (:mod:`bench_sim.workflows.sweep.report`), and the completion record last.
 
 Reuse
 -----
 The dynamic range through the chain is a property of the camera (sensor, timing, DTDI, the
 fused stages), not of the lights or the target: each worker measures it once per camera
-(:func:`bench_sim.experiments.execution.worker_cache`) on the sweep's root stream
+(:func:`bench_sim.runtime.execution.worker_cache`) on the sweep's root stream
 ``SeedSequence(seed)`` (the points draw from its children), so every point with the same
 camera reports the same numbers, whichever worker ran it. Worker processes live for the whole
 sweep, so the render module's caches (Mitsuba scenes, compiled kernels, light records) serve
@@ -51,7 +51,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, config_sha256
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.sweep_spec import SweepSpec, load_spec
+from bench_sim.workflows.sweep.spec import SweepSpec, load_spec
 
 __all__ = [
     "COLUMNS",
@@ -155,8 +155,8 @@ def _camera_key(cfg: BenchConfig, root_seed: int, dr_levels: int) -> str:
 
 
 def _camera_dr(cfg: BenchConfig, root_seed: int, dr_levels: int) -> Any:
-    from bench_sim.experiments.chain_dr import measure_chain_dynamic_range
-    from bench_sim.experiments.execution import worker_cache
+    from bench_sim.measure.chain_dr import measure_chain_dynamic_range
+    from bench_sim.runtime.execution import worker_cache
 
     return worker_cache(
         _camera_key(cfg, root_seed, dr_levels),
@@ -177,9 +177,9 @@ def measure_point(task: PointTask) -> dict[str, Any]:
     The pass draws from ``task_seed_sequence(root_seed, stream)``; the camera DR from the root
     ``SeedSequence(root_seed)``, cached per camera in the worker.
     """
-    from bench_sim.experiments.execution import task_seed_sequence
-    from bench_sim.experiments.pass_metrics import pass_metrics
-    from bench_sim.experiments.simulate import run_pass
+    from bench_sim.runtime.execution import task_seed_sequence
+    from bench_sim.measure.pass_metrics import pass_metrics
+    from bench_sim.workflows.simulate import run_pass
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
     from bench_sim.metrics.banding import banding_amplitude, folded_cycles_per_line, illumination_profile
     from bench_sim.sensor.model import stage_offset_dn
@@ -301,7 +301,7 @@ def _unfinished_sweep(out: Path) -> bool:
 def plan_sweep(spec_path: str | Path, out: str | Path, *, resume: bool = False) -> SweepPlan:
     """Check everything before any point runs (see the module docstring); raises
     :class:`~bench_sim.errors.BenchSimError` with one line on the first problem."""
-    from bench_sim.experiments.simulate import check_inputs
+    from bench_sim.workflows.simulate import check_inputs
     from bench_sim.io import check_output_dir
     from bench_sim.render.engines import check_fast_engine_valid
 
@@ -407,7 +407,7 @@ def _write_journal(out: Path, rec: dict[str, Any]) -> None:
 def _meta(
     plan: SweepPlan, status: str, sessions: list[dict[str, Any]], totals: dict[str, Any]
 ) -> dict[str, Any]:
-    from bench_sim.experiments.provenance import provenance
+    from bench_sim.runtime.provenance import provenance
 
     return provenance(
         plan.spec.base,
@@ -442,7 +442,7 @@ def run_sweep(
     Parameters
     ----------
     spec_path
-        The sweep spec (TOML, :mod:`bench_sim.experiments.sweep_spec`).
+        The sweep spec (TOML, :mod:`bench_sim.workflows.sweep.spec`).
     out
         Output folder (see the module docstring).
     workers, scheduler
@@ -455,9 +455,9 @@ def run_sweep(
     on_point
         Called in this process with each point's record as it is written.
     """
-    from bench_sim.experiments.execution import open_client, run_tasks
-    from bench_sim.experiments.preflight import preflight_tasks
-    from bench_sim.experiments.sweep_report import write_outputs, write_points_csv
+    from bench_sim.runtime.execution import open_client, run_tasks
+    from bench_sim.workflows.preflight import preflight_tasks
+    from bench_sim.workflows.sweep.report import write_outputs, write_points_csv
     from bench_sim.io import OUTPUT_MARKER, write_json
 
     if workers is not None and scheduler is not None:

@@ -2,7 +2,7 @@
 
 A photon-transfer series (EMVA 1288): a uniform field at many levels, from dark to beyond the
 saturation of ``Gamma1``, goes through the sensor model, the streaming DTDI accumulator (the
-one uniform-field runner, :func:`bench_sim.experiments.uniform_field.expose_uniform`, with its
+one uniform-field runner, :func:`bench_sim.measure.uniform_field.expose_uniform`, with its
 one pedestal rule) and the paper's fusion (:func:`bench_sim.fusion.paper.fuse_dtdi_hdr_eq11`,
 offsets removed). Per level and image the mean and the temporal variance come from an image
 pair (:func:`bench_sim.metrics.emva1288.mean_var_from_pair`), and the dynamic range
@@ -49,7 +49,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.uniform_field import (
+from bench_sim.measure.uniform_field import (
     expose_uniform,
     measurement_offsets_dn,
     measurement_pedestal_dn,
@@ -58,7 +58,7 @@ from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.metrics.dynamic_range import dr_increase_eq15_db
 from bench_sim.metrics.emva1288 import SaturationMethod, dynamic_range_from_series, mean_var_from_pair
 from bench_sim.metrics.snr import snr_versus_signal
-from bench_sim.parallel import child_sequence, chunk_generator, parallel_map, seed_sequence
+from bench_sim.runtime.parallel import child_sequence, chunk_generator, parallel_map, seed_sequence
 from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import (
     full_scale_dn,

@@ -2,7 +2,7 @@
 text and EMVA 1288 descriptor files.
 
 Every file carries its provenance in one format (the dict of
-:func:`bench_sim.experiments.provenance.provenance`: ``version``, ``seed``, ``config_sha256``,
+:func:`bench_sim.runtime.provenance.provenance`: ``version``, ``seed``, ``config_sha256``,
 ``config``): as a JSON attribute (EXR header, TIFF ImageDescription, PNG ``tEXt`` chunk
 ``bench_sim``), as ``#`` comment lines (CSV, EMVA descriptors), or as keys (JSON).
 

@@ -29,7 +29,7 @@ match; drawn uniformly from the sorted matches). Keys may also be written as nes
 glob patterns and the files they match) are relative to the spec file.
 
 **Streams.** Sample ``i`` of a dataset with root seed ``s`` owns
-:func:`bench_sim.experiments.execution.task_seed_sequence` ``(s, i)``
+:func:`bench_sim.runtime.execution.task_seed_sequence` ``(s, i)``
 (``SeedSequence(s).spawn(n)[i]``) and splits it in two (:func:`sample_streams`): the first child
 draws its parameters (keys in sorted order, one generator), the second drives its simulation
 (render seed, target generator, the sensor's fixed pattern, the temporal noise). A sample's
@@ -60,7 +60,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, BenchConfig, load_config, with_overrides
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.execution import task_seed_sequence
+from bench_sim.runtime.execution import task_seed_sequence
 from bench_sim.io import sha256_file
 
 __all__ = [
@@ -303,7 +303,7 @@ def _flatten(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 def sample_streams(seed: int, index: int) -> tuple[np.random.SeedSequence, np.random.SeedSequence]:
     """(parameter stream, simulation stream) of sample ``index``: the two children of
-    :func:`~bench_sim.experiments.execution.task_seed_sequence` ``(seed, index)``."""
+    :func:`~bench_sim.runtime.execution.task_seed_sequence` ``(seed, index)``."""
     params, simulation = task_seed_sequence(seed, index).spawn(2)
     return params, simulation
 
@@ -456,7 +456,7 @@ def _check_keys_and_extremes(spec: DatasetSpec, fixed_keys: Iterable[str]) -> No
 def load_spec(path: str | Path) -> DatasetSpec:
     """Load and check a dataset spec (see the module docstring); one-line :class:`BenchSimError`
     naming the file, the key, the value and what is allowed."""
-    from bench_sim.experiments.simulate import check_stages
+    from bench_sim.workflows.simulate import check_stages
 
     path = Path(path).expanduser().resolve()
     raw = _read_spec_toml(path)
@@ -503,7 +503,7 @@ def check_sample_configs(
     """Validate the benches of samples drawn as ``values`` (index -> :meth:`DatasetSpec.draw`):
     index -> config; every target image a sample reads is checked once (one-line errors naming
     the sample or the file)."""
-    from bench_sim.experiments.simulate import check_inputs
+    from bench_sim.workflows.simulate import check_inputs
 
     out: dict[int, BenchConfig] = {}
     seen: set[Any] = set()

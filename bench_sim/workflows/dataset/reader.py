@@ -6,7 +6,7 @@
 - :func:`iter_samples` ``(DIR)`` -> one :class:`Sample` at a time: numpy arrays and the
   sample's parameters and metrics, without xarray.
 
-Layout of ``DIR`` (the writer is :mod:`bench_sim.experiments.dataset`):
+Layout of ``DIR`` (the writer is :mod:`bench_sim.workflows.dataset.run`):
 
 =========================== =====================================================================
 ``data.zarr``               Zarr v3: ``dn``, ``mean_dn``, ``photons``, ``reflectance``,

@@ -6,7 +6,7 @@ steps: :func:`plan_ptc` (validate, place the levels) -> :func:`measure_ptc` (exp
 
 Measurement
 -----------
-The uniform-field runner (:mod:`bench_sim.experiments.uniform_field`) exposes a uniform field
+The uniform-field runner (:mod:`bench_sim.measure.uniform_field`) exposes a uniform field
 of ``mu_p`` photons per pixel per frame through the EMVA 1288 pixel model and the streaming DTDI
 accumulator, with the config's sensor, timing and DTDI settings. One pass of
 ``K = 2 L + max(stages) - 1`` frames over the top-left ``max(stages)`` rows x ``C`` columns gives,
@@ -27,7 +27,7 @@ column, so the fixed pattern is a column pattern; the expected values are
 :func:`bench_sim.sensor.model.stage_dsnu_dn` and :func:`bench_sim.sensor.model.stage_prnu`.
 
 Pedestal: the one rule of the uniform-field runner
-(:func:`bench_sim.experiments.uniform_field.measurement_pedestal_dn`): the configured
+(:func:`bench_sim.measure.uniform_field.measurement_pedestal_dn`): the configured
 ``dtdi.pedestal_dn`` (64 DN by default), raised where needed to keep every measured stage's
 dark value 5 sigma above 0 DN. It lowers the usable range of the word by the offset (reported).
 
@@ -42,7 +42,7 @@ Files (DIR, written as one set)
 * ``ptc_levels.csv`` (every level of every stage), ``ptc_summary.csv`` (one row per stage).
 * ``ptc.png`` (photon transfer: variance vs mean), ``snr.png`` (SNR vs photons per frame).
 
-Every file carries the provenance (:func:`bench_sim.experiments.provenance.provenance`).
+Every file carries the provenance (:func:`bench_sim.runtime.provenance.provenance`).
 
 References
 ----------
@@ -60,8 +60,8 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.experiments.provenance import provenance
-from bench_sim.experiments.uniform_field import (
+from bench_sim.runtime.provenance import provenance
+from bench_sim.measure.uniform_field import (
     expose_uniform,
     measurement_offsets_dn,
     measurement_pedestal_dn,
@@ -585,8 +585,8 @@ def run_ptc(
         size, ``out`` a file, a foreign non-empty folder or not writable, a run that does not fit
         in memory or on the disk), before anything is computed.
     """
-    from bench_sim.experiments.preflight import check_seed, preflight
-    from bench_sim.resources import estimate_ptc
+    from bench_sim.workflows.preflight import check_seed, preflight
+    from bench_sim.runtime.resources import estimate_ptc
 
     seed = check_seed(seed)
     plan = plan_ptc(

@@ -1,0 +1,1 @@
+"""bench-sim dataset: spec, run, card, and the reader of a dataset folder."""

@@ -1,0 +1,1 @@
+"""bench-sim sweep: spec (points), run (on the execution layer) and report (tables, plots)."""
