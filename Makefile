@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup reproduce sweep-example test install-check lint bench clean
+.PHONY: setup reproduce sweep-example test test-fast install-check lint bench clean
 
 .setup-stamp: pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -19,10 +19,19 @@ sweep-example: setup
 	rm -rf results/sweeps/light_ratio_beta
 	$(VENV)/bin/bench-sim sweep scenes/sweeps/light_ratio_beta.toml --out results/sweeps/light_ratio_beta
 
-test: setup
-	$(VENV)/bin/ruff check bench_sim tests benchmarks
+# ruff (style), mypy (types), import-linter (the layers of the data flow, no import cycles)
+lint: setup
+	$(VENV)/bin/ruff check bench_sim tests benchmarks scripts
+	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
+
+test: lint
 	$(PY) -m pytest
 	bash scripts/check_install.sh
+
+# The physics tier alone: closed forms, invariants and seeded statistical tests (under 30 s)
+test-fast: setup
+	$(PY) -m pytest -m physics
 
 # `pip install .` into a fresh venv, then `bench-sim reproduce --quick` from another folder
 install-check:

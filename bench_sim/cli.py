@@ -241,8 +241,8 @@ def doctor() -> None:
     """Print the chosen Mitsuba variant, the LLVM library and why, memory, and versions.
 
     A variant forced by ``BENCH_SIM_VARIANT`` that cannot run here is one line, exit status 2."""
-    from bench_sim.runtime.backend import choose_backend, versions
     from bench_sim.io import format_bytes
+    from bench_sim.runtime.backend import choose_backend, versions
     from bench_sim.runtime.resources import available_memory_bytes
 
     choice = choose_backend()
@@ -269,7 +269,7 @@ def render(
 ) -> None:
     """Render per-row exposures (photons per pixel per frame) to DIR/exposures.exr + meta.json."""
     from bench_sim.config import load_config
-    from bench_sim.workflows.render import run_render
+    from bench_sim.workflows.render_job import run_render
 
     run_render(load_config(config), frames=frames, engine=engine, seed=seed, out=out)
 

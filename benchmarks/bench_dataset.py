@@ -31,8 +31,8 @@ import time
 from pathlib import Path
 
 from bench_sim.config import SCENES_DIR
-from bench_sim.workflows.dataset.run import bytes_per_sample, run_dataset
 from bench_sim.runtime.execution import open_client
+from bench_sim.workflows.dataset.run import bytes_per_sample, run_dataset
 
 EXAMPLE = SCENES_DIR / "datasets" / "example.toml"
 

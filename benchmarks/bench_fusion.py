@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
-from bench_sim.measure.chain_dr import measure_chain_dynamic_range
 from bench_sim.fusion import (
     TRA_METHODS,
     fuse_dtdi_hdr_eq11,
@@ -28,6 +27,7 @@ from bench_sim.fusion import (
     merge_mertens_opencv,
     tone_map,
 )
+from bench_sim.measure.chain_dr import measure_chain_dynamic_range
 
 
 def _best_ms(func: Callable[[], Any], repeat: int) -> float:

@@ -27,8 +27,8 @@ import time
 from pathlib import Path
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, load_config
-from bench_sim.workflows.reproduce.run import run_reproduce
 from bench_sim.runtime.parallel import thread_count
+from bench_sim.workflows.reproduce.run import run_reproduce
 
 TARGET_S = {"full": 8.0, "quick": 2.5}
 MEMORY_LINES = (1024, 4096)

@@ -20,9 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, load_config
-from bench_sim.measure.ptc import plan_ptc
-from bench_sim.workflows.reproduce.run import FIG3_STAGES, quick_config
 from bench_sim.io import format_bytes
+from bench_sim.measure.ptc import plan_ptc
 from bench_sim.runtime.resources import (
     estimate_fuse,
     estimate_ptc,
@@ -30,6 +29,7 @@ from bench_sim.runtime.resources import (
     estimate_reproduce,
     estimate_simulate,
 )
+from bench_sim.workflows.reproduce.run import FIG3_STAGES, quick_config
 
 ROOT = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "bench_sim"]

@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from bench_sim.runtime import backend, resources
-from bench_sim.runtime.backend import ProbeResult
 from bench_sim.cli import app
 from bench_sim.config import DEFAULT_CONFIG_PATH, config_to_toml_dict, load_config
+from bench_sim.runtime import backend, resources
+from bench_sim.runtime.backend import ProbeResult
 
 runner = CliRunner()
 
@@ -528,7 +528,7 @@ def test_debug_shows_the_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPat
 
 def test_a_bug_is_one_line_with_status_1(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """An exception that is not the user's is named in one line (exit 1), no traceback."""
-    import bench_sim.workflows.render as job
+    import bench_sim.workflows.render_job as job
 
     def broken(*args: Any, **kwargs: Any) -> None:
         raise ZeroDivisionError("division by zero somewhere deep")
@@ -554,7 +554,7 @@ def test_odd_but_legal_configs_warn_with_numbers_and_run(tmp_path: Path) -> None
 def test_ctrl_c_inside_c_code_is_an_interruption(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Ctrl-C while a C extension imports comes back as ``SystemError`` from the
     ``KeyboardInterrupt``: still one line and exit status 130."""
-    import bench_sim.workflows.render as job
+    import bench_sim.workflows.render_job as job
 
     def interrupted(*args: Any, **kwargs: Any) -> None:
         try:

@@ -49,12 +49,12 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.measure.uniform_field import (
     expose_uniform,
     measurement_offsets_dn,
     measurement_pedestal_dn,
 )
-from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.metrics.dynamic_range import dr_increase_eq15_db
 from bench_sim.metrics.emva1288 import SaturationMethod, dynamic_range_from_series, mean_var_from_pair
 from bench_sim.metrics.snr import snr_versus_signal

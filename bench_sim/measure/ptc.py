@@ -60,12 +60,6 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.runtime.provenance import provenance
-from bench_sim.measure.uniform_field import (
-    expose_uniform,
-    measurement_offsets_dn,
-    measurement_pedestal_dn,
-)
 from bench_sim.io import (
     output_set,
     write_csv,
@@ -73,6 +67,11 @@ from bench_sim.io import (
     write_figure_png,
     write_json,
     write_tiff16,
+)
+from bench_sim.measure.uniform_field import (
+    expose_uniform,
+    measurement_offsets_dn,
+    measurement_pedestal_dn,
 )
 from bench_sim.metrics.emva1288 import (
     PhotonTransferResult,
@@ -82,6 +81,7 @@ from bench_sim.metrics.emva1288 import (
     snr_curve,
     spatial_nonuniformity,
 )
+from bench_sim.runtime.provenance import provenance
 from bench_sim.sensor.dtdi import validate_stages
 from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import (
@@ -585,8 +585,8 @@ def run_ptc(
         size, ``out`` a file, a foreign non-empty folder or not writable, a run that does not fit
         in memory or on the disk), before anything is computed.
     """
-    from bench_sim.workflows.preflight import check_seed, preflight
     from bench_sim.runtime.resources import estimate_ptc
+    from bench_sim.workflows.preflight import check_seed, preflight
 
     seed = check_seed(seed)
     plan = plan_ptc(

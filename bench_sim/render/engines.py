@@ -32,7 +32,6 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.runtime.parallel import parallel_map, thread_count
 from bench_sim.render.records import (
     REFERENCE_IRRADIANCE_W_M2,
     light_power_w_m2,
@@ -43,6 +42,7 @@ from bench_sim.render.texture import RunTexture, drum_texture, smear_filter
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.lights import frame_weights
 from bench_sim.rig.scene import light_names, scene_dict
+from bench_sim.runtime.parallel import parallel_map, thread_count
 
 __all__ = ["ReferenceEngine", "FastEngine", "check_fast_engine_valid"]
 

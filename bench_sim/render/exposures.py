@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from bench_sim.runtime.backend import BackendChoice, init_mitsuba
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.engines import FastEngine, ReferenceEngine, check_fast_engine_valid
@@ -23,6 +22,7 @@ from bench_sim.render.radiometry import airy_pixel_kernel, apply_psf, radiance_t
 from bench_sim.render.records import mitsuba_render_count
 from bench_sim.render.texture import RunTexture, run_texture
 from bench_sim.rig.geometry import RigGeometry, rig_geometry
+from bench_sim.runtime.backend import BackendChoice, init_mitsuba
 
 __all__ = ["RenderSetup", "prepare", "iter_photon_frames", "render_photons"]
 

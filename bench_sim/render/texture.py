@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
-from bench_sim.runtime.parallel import parallel_map, thread_count
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.target import TargetPanel, make_panel, rasterize_at
+from bench_sim.runtime.parallel import parallel_map, thread_count
 
 __all__ = ["RunTexture", "run_texture", "drum_texture", "smear_filter", "ground_truth_reflectance"]
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from bench_sim.version import __version__
 from bench_sim.config import BenchConfig, config_sha256, config_to_toml_dict
+from bench_sim.version import __version__
 
 __all__ = ["provenance", "render_provenance", "PROCESS_KEYS"]
 

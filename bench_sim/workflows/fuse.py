@@ -32,7 +32,6 @@ from typing import Any
 
 import numpy as np
 
-from bench_sim.version import __version__
 from bench_sim.config import TRA_METHODS
 from bench_sim.errors import BenchSimError
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
@@ -48,6 +47,7 @@ from bench_sim.io import (
 )
 from bench_sim.runtime.resources import check_resources, estimate_fuse
 from bench_sim.sensor.model import check_beta_bits
+from bench_sim.version import __version__
 
 __all__ = ["fuse_files", "check_stage_image"]
 

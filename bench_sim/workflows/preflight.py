@@ -104,7 +104,12 @@ def preflight_tasks(
     task's config (the backend only for local workers). The output folder itself is the
     caller's to check (resumable runs reuse theirs).
     """
-    from bench_sim.runtime.resources import check_resources, estimate_simulate, estimate_tasks, local_concurrency
+    from bench_sim.runtime.resources import (
+        check_resources,
+        estimate_simulate,
+        estimate_tasks,
+        local_concurrency,
+    )
 
     sized = [(estimate_simulate(cfg, stages), cfg) for cfg, stages in tasks]
     if not sized:

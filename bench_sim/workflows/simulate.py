@@ -190,10 +190,12 @@ def run_pass(
     on_frames
         Called with the number of frames after every rendered chunk (progress bars).
     """
-    from bench_sim.version import __version__
     from bench_sim.config import config_sha256, config_to_toml_text
-    from bench_sim.runtime.parallel import prefetch, seed_sequence
     from bench_sim.render.exposures import iter_photon_frames, prepare
+    from bench_sim.runtime.parallel import prefetch, seed_sequence
+    from bench_sim.sensor.dtdi import DTDIAccumulator, frames_needed, full_scale_dn
+    from bench_sim.sensor.emva import draw_fixed_pattern
+    from bench_sim.sensor.model import word_dtype
     from bench_sim.sensor.stage_truth import (
         StageSums,
         reflectance_rows,
@@ -202,10 +204,8 @@ def run_pass(
         stage_mean_dn,
         stage_reflectance,
     )
-    from bench_sim.sensor.dtdi import DTDIAccumulator, frames_needed, full_scale_dn
-    from bench_sim.sensor.emva import draw_fixed_pattern
-    from bench_sim.sensor.model import word_dtype
     from bench_sim.sensor.stream import iter_exposed
+    from bench_sim.version import __version__
 
     st = check_stages(stages, cfg.sensor.rows)
     rng = np.random.default_rng(seed)  # a Generator is used as is
@@ -421,8 +421,8 @@ def check_inputs(
     image file and, given the ``stages``, the output folder (if any), the memory and disk of the
     run and the backend (:func:`bench_sim.workflows.preflight.preflight`); raises
     :class:`BenchSimError` (one line)."""
-    from bench_sim.workflows.preflight import preflight
     from bench_sim.runtime.resources import estimate_simulate
+    from bench_sim.workflows.preflight import preflight
 
     if stages is None:  # the inputs alone
         preflight(cfg, out=None, estimate=None, render=False)
@@ -515,9 +515,9 @@ def run_simulate(
     any rendering; nothing is written unless the whole set is complete.
     """
     from bench_sim.config import load_config
-    from bench_sim.workflows.preflight import check_seed
-    from bench_sim.runtime.provenance import provenance
     from bench_sim.io import output_set
+    from bench_sim.runtime.provenance import provenance
+    from bench_sim.workflows.preflight import check_seed
 
     if fmt not in FORMATS:
         raise BenchSimError(f"--format = {fmt!r}: allowed {', '.join(FORMATS)}")

@@ -77,9 +77,9 @@ def write_thumbnails(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bench_sim.workflows.reproduce.figures import stage_display
     from bench_sim.fusion.tonemap import tone_map
     from bench_sim.io import write_png
+    from bench_sim.workflows.reproduce.figures import stage_display
 
     variables = ["dn", "reflectance"] + (["hdr"] if spec.fused else [])
     per_row = 4
@@ -262,10 +262,10 @@ def write_card(
     md += [
         "## How to load it", "",
         "```python",
-        "import bench_sim.workflows.dataset.reader",
-        "ds = bench_sim.workflows.dataset.reader.open(DIR)      # xarray.Dataset, lazy; manifest columns as coordinates",
+        "import bench_sim",
+        "ds = bench_sim.dataset.open(DIR)      # xarray.Dataset, lazy; manifest columns as coordinates",
         'ds.dn.sel(stage=80).isel(sample=0)     # one stage image; ds["lights.strong.irradiance_w_m2"] ...',
-        "for s in bench_sim.workflows.dataset.reader.iter_samples(DIR):   # numpy only, one sample at a time",
+        "for s in bench_sim.dataset.iter_samples(DIR):   # numpy only, one sample at a time",
         '    s.arrays["dn"], s.arrays["mean_dn"], s.values, s.metrics',
         "```", "",
         "Or with the libraries themselves: `xarray.open_zarr(DIR + '/data.zarr')` (keep the samples "

@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
+from bench_sim.errors import BenchSimError
 from bench_sim.workflows.dataset.reader import (
     COMPLETION_RECORD,
     DATA_STORE,
@@ -57,7 +58,6 @@ from bench_sim.workflows.dataset.reader import (
     read_records,
     record_path,
 )
-from bench_sim.errors import BenchSimError
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -259,9 +259,9 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
     import dask.array as da
     import xarray as xr
 
-    from bench_sim.version import __version__
     from bench_sim.config import config_sha256, config_to_toml_text
     from bench_sim.io import write_json
+    from bench_sim.version import __version__
 
     info = _info(spec)
     schema = info["schema"]["variables"]
@@ -333,8 +333,8 @@ def _umask() -> int:
 def _check_folder(spec: DatasetSpec, out: Path, *, reuse: bool) -> str:
     """Decide what to do with ``out`` before anything runs: ``create`` (lay out a new dataset,
     replacing an empty folder or a replaceable dataset) or ``reuse`` (the same dataset)."""
-    from bench_sim.version import __version__
     from bench_sim.io import check_output_dir
+    from bench_sim.version import __version__
 
     state = _folder_state(out)
     if state == "file":
@@ -511,11 +511,11 @@ def run_dataset(
     command
         The command line, for the dataset card.
     """
+    from bench_sim.io import check_free_space, format_bytes, write_json
+    from bench_sim.runtime.execution import open_client, run_tasks
     from bench_sim.workflows.dataset.card import write_card
     from bench_sim.workflows.dataset.spec import check_sample_configs, load_spec, sample_streams
-    from bench_sim.runtime.execution import open_client, run_tasks
     from bench_sim.workflows.preflight import preflight_tasks
-    from bench_sim.io import check_free_space, format_bytes, write_json
 
     t_start = time.perf_counter()
     if workers is not None and scheduler is not None:
@@ -582,8 +582,8 @@ def run_dataset(
 
 
 def _manifest_meta(spec: DatasetSpec) -> dict[str, Any]:
-    from bench_sim.version import __version__
     from bench_sim.config import config_sha256
+    from bench_sim.version import __version__
 
     return {
         "version": __version__, "seed": spec.seed, "config_sha256": config_sha256(spec.base),

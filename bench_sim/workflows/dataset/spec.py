@@ -60,8 +60,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, BenchConfig, load_config, with_overrides
 from bench_sim.errors import BenchSimError
-from bench_sim.runtime.execution import task_seed_sequence
 from bench_sim.io import sha256_file
+from bench_sim.runtime.execution import task_seed_sequence
 
 __all__ = [
     "DISTRIBUTIONS",

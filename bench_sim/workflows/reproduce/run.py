@@ -166,15 +166,15 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     """Run the reproduction and write its outputs into ``out``. Returns ``metrics.json``'s dict."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from bench_sim.measure.chain_dr import measure_chain_dynamic_range
-    from bench_sim.measure.pass_metrics import pass_metrics
-    from bench_sim.workflows.preflight import check_seed, preflight
-    from bench_sim.workflows.simulate import run_pass
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
     from bench_sim.fusion.tonemap import quantize_display, tone_map
+    from bench_sim.measure.chain_dr import measure_chain_dynamic_range
+    from bench_sim.measure.pass_metrics import pass_metrics
     from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
     from bench_sim.runtime.resources import estimate_reproduce
     from bench_sim.sensor.model import stage_offset_dn
+    from bench_sim.workflows.preflight import check_seed, preflight
+    from bench_sim.workflows.simulate import run_pass
 
     seed = check_seed(seed)
     if quick:
@@ -288,8 +288,8 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         "engine": setup.info["engine"],
         "variant": setup.info["variant"],
     }
-    from bench_sim.workflows.reproduce.report import write_report
     from bench_sim.io import output_set, write_json
+    from bench_sim.workflows.reproduce.report import write_report
 
     record = {"command": "reproduce", "quick": quick, "version": meta["version"], "seed": int(seed),
               "config_sha256": meta["config_sha256"]}
@@ -344,9 +344,9 @@ def _write_outputs(
     panel: Any,
     lines: int,
 ) -> None:
-    from bench_sim.workflows.reproduce.figures import fig3_stages, fig4_hdr, stage_display
     from bench_sim.io import atomic_path, write_exr, write_png, write_tiff16
     from bench_sim.runtime.parallel import start
+    from bench_sim.workflows.reproduce.figures import fig3_stages, fig4_hdr, stage_display
 
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
     g1, g2 = stage_images[mu1], stage_images[mu2]

@@ -177,12 +177,12 @@ def measure_point(task: PointTask) -> dict[str, Any]:
     The pass draws from ``task_seed_sequence(root_seed, stream)``; the camera DR from the root
     ``SeedSequence(root_seed)``, cached per camera in the worker.
     """
-    from bench_sim.runtime.execution import task_seed_sequence
-    from bench_sim.measure.pass_metrics import pass_metrics
-    from bench_sim.workflows.simulate import run_pass
     from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+    from bench_sim.measure.pass_metrics import pass_metrics
     from bench_sim.metrics.banding import banding_amplitude, folded_cycles_per_line, illumination_profile
+    from bench_sim.runtime.execution import task_seed_sequence
     from bench_sim.sensor.model import stage_offset_dn
+    from bench_sim.workflows.simulate import run_pass
 
     cfg = task.cfg
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
@@ -301,9 +301,9 @@ def _unfinished_sweep(out: Path) -> bool:
 def plan_sweep(spec_path: str | Path, out: str | Path, *, resume: bool = False) -> SweepPlan:
     """Check everything before any point runs (see the module docstring); raises
     :class:`~bench_sim.errors.BenchSimError` with one line on the first problem."""
-    from bench_sim.workflows.simulate import check_inputs
     from bench_sim.io import check_output_dir
     from bench_sim.render.engines import check_fast_engine_valid
+    from bench_sim.workflows.simulate import check_inputs
 
     spec = load_spec(spec_path)
     for p in spec.points:
@@ -455,10 +455,10 @@ def run_sweep(
     on_point
         Called in this process with each point's record as it is written.
     """
+    from bench_sim.io import OUTPUT_MARKER, write_json
     from bench_sim.runtime.execution import open_client, run_tasks
     from bench_sim.workflows.preflight import preflight_tasks
     from bench_sim.workflows.sweep.report import write_outputs, write_points_csv
-    from bench_sim.io import OUTPUT_MARKER, write_json
 
     if workers is not None and scheduler is not None:
         raise BenchSimError(

@@ -10,8 +10,8 @@ from typer.testing import CliRunner
 
 from bench_sim.cli import app
 from bench_sim.config import load_config, with_overrides
-from bench_sim.workflows.reproduce.run import run_reproduce
 from bench_sim.io import read_png_text
+from bench_sim.workflows.reproduce.run import run_reproduce
 
 runner = CliRunner()
 

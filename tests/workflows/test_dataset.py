@@ -127,7 +127,7 @@ def test_samples_equal_across_workers_and_only(reference, tmp_path):
 def test_resume_after_kill_equals_uninterrupted_run(reference, tmp_path):
     spec, ref = reference
     out = tmp_path / "killed"
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
     proc = subprocess.Popen(
         [sys.executable, "-m", "bench_sim.cli", "dataset", str(spec), "--out", str(out), "--workers", "0"],
         env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,

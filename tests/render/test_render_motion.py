@@ -155,6 +155,6 @@ def test_mesh_files_are_written_once_and_removed_at_exit(tmp_path):
     )
     env = {**os.environ, "TMPDIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         cwd=Path(__file__).resolve().parents[1], check=True)
+                         cwd=Path(__file__).resolve().parents[2], check=True)
     assert out.stdout.strip() == "2"
     assert list(tmp_path.iterdir()) == []

@@ -175,9 +175,9 @@ def test_run_pass_gives_the_previous_pipelines_stage_images(truth):
     the stage words of the render -> ``sensor_dtdi_pass`` chain it replaced, bit for bit, and
     leaves the generator in the same state (the DR measurement draws from it next), so every
     number in ``metrics.json`` is unchanged."""
-    from bench_sim.workflows.simulate import run_pass
     from bench_sim.render.exposures import iter_photon_frames, prepare
     from bench_sim.sensor.stream import sensor_dtdi_pass
+    from bench_sim.workflows.simulate import run_pass
 
     cfg = config_from_dict(_overrides(timing={"sync_error": 0.02}))
     stages = [1, 2, 5, 8, 12]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from bench_sim.config import BenchConfig, with_overrides
+from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.measure.chain_dr import ChainDR, measure_chain_dynamic_range
 from bench_sim.measure.uniform_field import (
     PEDESTAL_SIGMAS,
@@ -15,7 +16,6 @@ from bench_sim.measure.uniform_field import (
     measurement_offsets_dn,
     measurement_pedestal_dn,
 )
-from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.metrics.dynamic_range import dr_increase_eq15_db
 from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import stage_dark_std_dn, stage_saturation_photons

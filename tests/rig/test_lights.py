@@ -11,10 +11,10 @@ import pytest
 from scipy import integrate
 
 from bench_sim.config import ConfigError, load_config
-from bench_sim.workflows.simulate import run_pass
 from bench_sim.render.exposures import prepare
 from bench_sim.rig.lights import flicker_fundamental, frame_weights, window_mean
 from bench_sim.rig.scene import area_radiance_w_m2_sr, light_names
+from bench_sim.workflows.simulate import run_pass
 from tests.conftest import ALL_OFF, make_cfg, tiny_cfg
 
 R = 0.10  # the default drum radius: the camera looks at (0, 0, R)

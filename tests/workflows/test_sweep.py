@@ -19,11 +19,11 @@ from typer.testing import CliRunner
 
 from bench_sim.cli import app
 from bench_sim.errors import BenchSimError
+from bench_sim.metrics.banding import banding_amplitude, folded_cycles_per_line
 from bench_sim.workflows.sweep.run import plan_sweep, run_sweep
 from bench_sim.workflows.sweep.spec import load_spec
-from bench_sim.metrics.banding import banding_amplitude, folded_cycles_per_line
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 #: a 12 x 48 sensor on the paper rig, 48 lines (spot edge and wedge in view)
 TINY_BASE = f"""

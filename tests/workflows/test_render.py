@@ -9,8 +9,8 @@ from typer.testing import CliRunner
 
 from bench_sim.cli import app
 from bench_sim.config import DEFAULT_CONFIG_PATH
-from bench_sim.workflows.render import read_exposures
 from bench_sim.io import read_exr
+from bench_sim.workflows.render_job import read_exposures
 
 runner = CliRunner()
 

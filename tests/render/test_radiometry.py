@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from bench_sim.runtime.backend import init_mitsuba
 from bench_sim.render.exposures import render_photons
 from bench_sim.render.radiometry import (
     airy_pixel_kernel,
@@ -17,6 +16,7 @@ from bench_sim.render.radiometry import (
     photons_per_pixel,
 )
 from bench_sim.rig.geometry import rig_geometry
+from bench_sim.runtime.backend import init_mitsuba
 from tests.conftest import tiny_cfg
 
 

@@ -1,0 +1,1 @@
+"""One pass: frames -> sensor -> DTDI -> stage images and their truth."""

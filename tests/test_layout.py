@@ -1,0 +1,88 @@
+"""The package's layout rules, checked on its source (the layers and cycles: import-linter).
+
+- no file in ``bench_sim/`` over 500 lines, no function over 80 lines;
+- no two modules or packages with the same name;
+- imports between bench_sim's own modules only at the top of a module (an import inside a
+  function hides a dependency from import-linter's graph and from the reader);
+- ``bench_sim.cli`` imports none of the heavy libraries (Mitsuba/Dr.Jit, Dask, matplotlib,
+  xarray, zarr), so ``bench-sim --help`` stays fast: they are imported where they are used.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "bench_sim"
+SOURCES = sorted(PACKAGE.rglob("*.py"))
+MAX_FILE_LINES = 500
+MAX_FUNCTION_LINES = 80
+HEAVY = ("mitsuba", "drjit", "dask", "distributed", "matplotlib", "xarray", "zarr")
+
+
+def _rel(path: Path) -> str:
+    return str(path.relative_to(PACKAGE.parent))
+
+
+def _functions(tree: ast.AST) -> list[ast.FunctionDef | ast.AsyncFunctionDef]:
+    return [n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef)]
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=_rel)
+def test_file_length(path: Path) -> None:
+    lines = len(path.read_text().splitlines())
+    assert lines <= MAX_FILE_LINES, f"{_rel(path)}: {lines} lines (at most {MAX_FILE_LINES})"
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=_rel)
+def test_function_length(path: Path) -> None:
+    long = [
+        f"{f.name} ({f.end_lineno - f.lineno + 1} lines, line {f.lineno})"
+        for f in _functions(ast.parse(path.read_text()))
+        if f.end_lineno is not None and f.end_lineno - f.lineno + 1 > MAX_FUNCTION_LINES
+    ]
+    assert not long, f"{_rel(path)}: functions over {MAX_FUNCTION_LINES} lines: {', '.join(long)}"
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=_rel)
+def test_own_imports_at_the_top(path: Path) -> None:
+    inner = []
+    for func in _functions(ast.parse(path.read_text())):
+        for node in ast.walk(func):
+            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("bench_sim")):
+                inner.append(f"line {node.lineno} in {func.name}")
+            elif isinstance(node, ast.Import) and any(a.name.startswith("bench_sim") for a in node.names):
+                inner.append(f"line {node.lineno} in {func.name}")
+    assert not inner, f"{_rel(path)}: bench_sim imported inside a function: {', '.join(inner)}"
+
+
+#: the roles of a workflow package's modules (``workflows/sweep/spec.py``, ``workflows/dataset/spec.py``):
+#: the same name in each workflow package, and nowhere else
+WORKFLOW_ROLES = {"spec", "run", "report"}
+
+
+def test_module_names_unique() -> None:
+    names: Counter[str] = Counter()
+    for p in SOURCES:
+        if p.name == "__main__.py" or p == PACKAGE / "__init__.py":
+            continue
+        name = p.parent.name if p.name == "__init__.py" else p.stem
+        in_workflow_package = p.parent.parent.name == "workflows" and p.name != "__init__.py"
+        if not (in_workflow_package and name in WORKFLOW_ROLES):
+            names[name] += 1
+    twice = sorted(n for n, c in names.items() if c > 1)
+    assert not twice, f"module or package names used more than once in bench_sim/: {twice}"
+
+
+def test_cli_import_is_light() -> None:
+    code = (
+        "import sys, bench_sim.cli\n"
+        f"print(' '.join(sorted(m for m in {HEAVY!r} if m in sys.modules)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "", f"importing bench_sim.cli loads heavy modules: {out.strip()}"
