@@ -1,22 +1,58 @@
 """bench_sim: a physically-based optical test-bench simulator for HDR push-broom imaging with
 digital time-delay integration (DTDI).
 
-Data flow (one direction): ``config -> rig -> render -> sensor -> fusion -> metrics -> experiments``.
+Data flow (one direction): ``config -> rig -> render -> sensor -> fusion -> metrics -> measure ->
+workflows -> cli``.
+
+The public API:
+
+* :func:`simulate` - any bench to its DTDI stage images with exact ground truth
+  (:func:`bench_sim.workflows.simulate.simulate`);
+* :func:`run_pass` - one pass, frames -> sensor -> DTDI -> stage images and their truth
+  (:func:`bench_sim.pipeline.run_pass`);
+* :func:`load_config` - a bench config from TOML (:func:`bench_sim.config.load_config`);
+* :mod:`dataset` - reading a generated data set: ``bench_sim.dataset.open(DIR)``,
+  ``bench_sim.dataset.iter_samples(DIR)`` (:mod:`bench_sim.workflows.dataset.reader`);
+* ``__version__`` - the installed version (:mod:`bench_sim.version`).
+
+The package itself imports nothing: each public name is resolved from its module (the table
+:data:`PUBLIC`) the first time it is used (PEP 562), so ``import bench_sim.errors`` or
+``bench_sim.cli``'s start-up pay only for what they import, and Ctrl-C during start-up is
+handled by :mod:`bench_sim.__main__`. The dependencies stay visible: every module imports its own
+at its top.
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from __future__ import annotations
 
-try:
-    __version__ = version("bench_sim")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
-    __version__ = "0.0.0+source"
+import importlib
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["__version__", "simulate"]
+if TYPE_CHECKING:
+    from bench_sim.config import load_config
+    from bench_sim.pipeline import run_pass
+    from bench_sim.version import __version__
+    from bench_sim.workflows.dataset import reader as dataset
+    from bench_sim.workflows.simulate import simulate
+
+__all__ = ["__version__", "dataset", "load_config", "run_pass", "simulate"]
+
+#: public name -> (module, attribute; ``None`` for the module itself)
+PUBLIC: dict[str, tuple[str, str | None]] = {
+    "__version__": ("bench_sim.version", "__version__"),
+    "dataset": ("bench_sim.workflows.dataset.reader", None),
+    "load_config": ("bench_sim.config", "load_config"),
+    "run_pass": ("bench_sim.pipeline", "run_pass"),
+    "simulate": ("bench_sim.workflows.simulate", "simulate"),
+}
 
 
-def __getattr__(name: str):  # lazy: importing bench_sim stays cheap
-    if name == "simulate":
-        from bench_sim.workflows.simulate import simulate
+def __getattr__(name: str) -> Any:
+    if name not in PUBLIC:
+        raise AttributeError(f"module 'bench_sim' has no attribute {name!r}")
+    module, attr = PUBLIC[name]
+    value = importlib.import_module(module)
+    return value if attr is None else getattr(value, attr)
 
-        return simulate
-    raise AttributeError(f"module 'bench_sim' has no attribute {name!r}")
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

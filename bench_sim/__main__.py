@@ -1,7 +1,8 @@
 """``python -m bench_sim`` and the ``bench-sim`` script: the command line of :mod:`bench_sim.cli`.
 
-Ctrl-C while the command line is still being imported (before :mod:`bench_sim.cli` takes over
-signals and errors) is one line and exit status 130 as well, not a traceback.
+Ctrl-C while this module imports the command line (before :mod:`bench_sim.cli` takes over
+signals and errors) is one line and exit status 130 as well, not a traceback. (The package
+itself, ``bench_sim/__init__.py``, runs before this module and imports nothing.)
 """
 
 from __future__ import annotations
@@ -16,12 +17,14 @@ def _early_interrupt(signum: int, frame: Any) -> None:
     raise SystemExit(130)
 
 
-def main() -> None:
-    """Import the command line with Ctrl-C handled, then run it."""
-    previous = signal.signal(signal.SIGINT, _early_interrupt)
-    from bench_sim.cli import app
+_PREVIOUS_SIGINT = signal.signal(signal.SIGINT, _early_interrupt)
+from bench_sim.cli import app  # noqa: E402 - imported with Ctrl-C handled
 
-    signal.signal(signal.SIGINT, previous)
+signal.signal(signal.SIGINT, _PREVIOUS_SIGINT)
+
+
+def main() -> None:
+    """Run the command line."""
     app()
 
 

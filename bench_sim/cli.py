@@ -12,7 +12,10 @@ gives every command, including those added later, the same behaviour towards the
 * anything else is a bug: one line naming it, exit status 1.
 
 No traceback reaches the user unless ``BENCH_SIM_DEBUG=1`` (then it is printed before the line).
-Heavy modules are imported inside the commands so ``bench-sim --help`` stays instant.
+bench_sim's workflows are imported at the top (as modules: a command calls ``module.function``
+when it runs, so a test can patch it); the heavy libraries they use (Mitsuba, Dask, matplotlib,
+xarray, zarr) are imported inside the functions that use them, so ``bench-sim --help`` stays
+fast (``tests/test_layout.py`` checks it).
 """
 
 from __future__ import annotations
@@ -23,15 +26,25 @@ import signal
 import sys
 import traceback
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import typer
 from typer.core import TyperGroup
 
-from bench_sim.config import DEFAULT_CONFIG_PATH, TRA_METHODS
+from bench_sim.config import DEFAULT_CONFIG_PATH, load_config
 from bench_sim.errors import BenchSimError
+from bench_sim.fusion.tonemap import TONEMAP_METHODS
+from bench_sim.io import format_bytes
+from bench_sim.runtime.backend import choose_backend, versions
+from bench_sim.runtime.resources import available_memory_bytes
+from bench_sim.workflows import fuse as fuse_workflow
+from bench_sim.workflows import ptc_job, render_job
+from bench_sim.workflows import simulate as simulate_workflow
+from bench_sim.workflows.dataset import run as dataset_run
+from bench_sim.workflows.reproduce import run as reproduce_run
+from bench_sim.workflows.sweep import run as sweep_run
 
 try:  # typer >= 0.22 carries its own copy of click
     from typer._click import exceptions as _click_exc
@@ -190,12 +203,25 @@ class _BenchSimGroup(TyperGroup):
         # a command's return value is not an exit status (as in click's standalone mode)
         guarded(lambda: super(_BenchSimGroup, self).invoke(ctx))
 
-    def main(self, args: Any = None, prog_name: Any = None, complete_var: Any = None,
-             standalone_mode: bool = True, **extra: Any) -> Any:
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        windows_expand_args: bool = True,
+        **extra: Any,
+    ) -> Any:
         if not standalone_mode:
-            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            return super().main(
+                args, prog_name, complete_var, standalone_mode=False,
+                windows_expand_args=windows_expand_args, **extra,
+            )
         try:
-            rv = super().main(args, PROG, complete_var, standalone_mode=False, **extra)
+            rv = super().main(
+                args, PROG, complete_var, standalone_mode=False,
+                windows_expand_args=windows_expand_args, **extra,
+            )
         except _click_exc.NoArgsIsHelpError as exc:
             exc.show()
             sys.exit(exc.exit_code)
@@ -241,10 +267,6 @@ def doctor() -> None:
     """Print the chosen Mitsuba variant, the LLVM library and why, memory, and versions.
 
     A variant forced by ``BENCH_SIM_VARIANT`` that cannot run here is one line, exit status 2."""
-    from bench_sim.io import format_bytes
-    from bench_sim.runtime.backend import choose_backend, versions
-    from bench_sim.runtime.resources import available_memory_bytes
-
     choice = choose_backend()
     print(f"variant     : {choice.variant} ({choice.kind})")
     print(f"libLLVM     : {choice.llvm_path or '-'}")
@@ -268,10 +290,7 @@ def render(
     out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/render"),
 ) -> None:
     """Render per-row exposures (photons per pixel per frame) to DIR/exposures.exr + meta.json."""
-    from bench_sim.config import load_config
-    from bench_sim.workflows.render_job import run_render
-
-    run_render(load_config(config), frames=frames, engine=engine, seed=seed, out=out)
+    render_job.run_render(load_config(config), frames=frames, engine=engine, seed=seed, out=out)
 
 
 @app.command()
@@ -282,12 +301,9 @@ def ptc(
     out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/ptc"),
 ) -> None:
     """Photon-transfer series through the sensor and DTDI: EMVA 1288 files and results."""
-    from bench_sim.config import load_config
-    from bench_sim.measure.ptc import run_ptc
-    from bench_sim.workflows.simulate import parse_stages_arg
-
     cfg = load_config(config)
-    run_ptc(cfg, stages=list(parse_stages_arg(stages, cfg.sensor.rows)), seed=seed, out=out)
+    chosen = list(simulate_workflow.parse_stages_arg(stages, cfg.sensor.rows))
+    ptc_job.run_ptc(cfg, stages=chosen, seed=seed, out=out)
 
 
 @app.command()
@@ -300,7 +316,7 @@ def fuse(
     out: Annotated[Path, typer.Option("--out", help="HDR output (.exr)")] = Path("hdr.exr"),
     tra: Annotated[Path | None, typer.Option("--tra", help="also write Gamma_TRA (.png)")] = None,
     tra_method: Annotated[
-        str, typer.Option("--tra-method", help=" | ".join(TRA_METHODS))
+        str, typer.Option("--tra-method", help=" | ".join(TONEMAP_METHODS))
     ] = "log",
     pedestal: Annotated[
         float,
@@ -312,9 +328,7 @@ def fuse(
     ] = 0.0,
 ) -> None:
     """Fuse two stage images with the paper's rule (eq. 11)."""
-    from bench_sim.workflows.fuse import fuse_files
-
-    fuse_files(
+    fuse_workflow.fuse_files(
         low, high, mu1=mu1, mu2=mu2, beta=beta, out=out, tra=tra, tra_method=tra_method,
         pedestal_dn=pedestal,
     )
@@ -328,11 +342,8 @@ def reproduce(
     quick: Annotated[bool, typer.Option("--quick", help="small preset for CI and first runs")] = False,
 ) -> None:
     """Reproduce the paper end to end: Fig. 3, Fig. 4, Table 1, DR analysis, report."""
-    from bench_sim.config import load_config
-    from bench_sim.workflows.reproduce.run import run_reproduce
-
     cfg = load_config(config)
-    run_reproduce(cfg, seed=seed, out=out, quick=quick)
+    reproduce_run.run_reproduce(cfg, seed=seed, out=out, quick=quick)
 
 
 @app.command()
@@ -345,9 +356,7 @@ def simulate(
 ) -> None:
     """Any bench to its DTDI stage images with exact ground truth (dn, mean_dn, photons,
     reflectance, clipped, hdr): DIR/simulation.zarr, simulation.nc, or TIFFs + meta.json."""
-    from bench_sim.workflows.simulate import run_simulate
-
-    run_simulate(config, stages=stages, seed=seed, out=out, fmt=fmt)
+    simulate_workflow.run_simulate(config, stages=stages, seed=seed, out=out, fmt=fmt)
 
 
 #: the execution layer of ``dataset`` and ``sweep`` (bench_sim.runtime.execution.open_client)
@@ -377,14 +386,12 @@ def dataset(
 ) -> None:
     """Synthetic validation dataset: many samples with exact ground truth, sharded per sample in
     DIR/data.zarr, a manifest, a dataset card; resumable, on Dask."""
-    from bench_sim.workflows.dataset.run import main_summary, run_dataset
-
     command = f"bench-sim dataset {spec} --out {out}"  # what remakes it (workers change nothing)
-    run = run_dataset(
+    run = dataset_run.run_dataset(
         spec, out, workers=workers, scheduler=scheduler, resume=resume, only=only,
         progress=sys.stderr.isatty(), command=command,
     )
-    print(main_summary(run))
+    print(dataset_run.main_summary(run))
     if run.failed:
         raise typer.Exit(1)
 
@@ -403,9 +410,7 @@ def sweep(
 ) -> None:
     """Scenario study: one simulation pass per point of a parameter sweep, on Dask:
     DIR/points.csv, sweep.nc, plots/, sweep.json, report.md."""
-    from bench_sim.workflows.sweep.run import run_sweep
-
-    run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, plots=plots)
+    sweep_run.run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, plots=plots)
 
 
 def main() -> None:  # pragma: no cover

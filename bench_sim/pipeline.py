@@ -1,1 +1,476 @@
-"""One pass: frames -> sensor -> DTDI -> stage images and their truth."""
+"""One pass: frames -> sensor -> DTDI -> stage images and their truth.
+
+:func:`run_pass` renders the frames ``0 .. L + max(stages) - 2`` (``L = config.lines``), exposes
+the rows ``0 .. max(stages) - 1`` of the sensor (EMVA 1288 model, :mod:`bench_sim.sensor.emva`)
+through the one sensor + DTDI loop (:func:`bench_sim.sensor.stream.iter_stream`), accumulates
+every requested stage (paper eq. 1-2, 4) and, from the same frames and the same physical sensor,
+the truth (:mod:`bench_sim.sensor.stage_truth`). Its dataset (:class:`xarray.Dataset`,
+dimensions ``stage``, ``line``, ``column``) holds the variables of :data:`PASS_VARIABLES`:
+
+=============== ======================================================================
+``dn``          stage words (``0 .. 2**beta - 1``; uint16 up to beta = 16, else uint32)
+``mean_dn``     exact expectation of ``dn`` before the word clips (fixed patterns in)
+``photons``     mean photons collected by the stage pixel (its ``m`` rows, smear in)
+``reflectance`` target reflectance integrated by the pixel's ``m`` footprints
+``clipped``     a read hit full well or the ADC top, or the word hit ``2**beta - 1``
+``gamma_hdr``   eq. 11 fusion of stages ``fusion.mu1``, ``fusion.mu2`` (when both requested)
+``gamma_hdr_source``  the stage each ``gamma_hdr`` pixel came from
+=============== ======================================================================
+
+Attributes carry the resolved config as TOML text, its SHA-256, the seed, the version, the
+engine and the Mitsuba variant. Random numbers come from one generator, drawn in a fixed order
+(render seed, fixed pattern, then the seed of the temporal noise, from which every chunk of
+frames spawns its own stream), so the same config and seed give identical data with any number
+of threads. Rendering runs a chunk ahead in its own thread and the chunks of frames are exposed
+on the thread pool (:mod:`bench_sim.runtime.parallel`) while the stages accumulate in order.
+
+:data:`PASS_VARIABLES` is the one table of the pass's variables: the arrays the pass allocates,
+the dataset's variables and units, the data set's stored dtypes
+(:mod:`bench_sim.workflows.dataset.reader`) and the resource estimates
+(:func:`stage_pixel_bytes`) all follow it.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bench_sim.config import BETA_BITS_MAX, BenchConfig, config_sha256, config_to_toml_text
+from bench_sim.errors import BenchSimError
+from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+from bench_sim.render.exposures import RenderSetup, iter_photon_frames, prepare
+from bench_sim.runtime.parallel import prefetch, seed_sequence
+from bench_sim.sensor.dtdi import frames_needed, full_scale_dn
+from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern
+from bench_sim.sensor.model import word_dtype
+from bench_sim.sensor.stage_truth import (
+    StageSums,
+    reflectance_rows,
+    row_footprints,
+    stage_dark_offset_dn,
+    stage_mean_dn,
+    stage_reflectance,
+)
+from bench_sim.sensor.stream import DEFAULT_CHUNK_FRAMES, Exposed, iter_stream
+from bench_sim.version import __version__
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+__all__ = [
+    "run_pass",
+    "PassResult",
+    "check_stages",
+    "Variable",
+    "PASS_VARIABLES",
+    "VARIABLES_BY_NAME",
+    "STAGE_DIMS",
+    "IMAGE_DIMS",
+    "WORD",
+    "pass_variables",
+    "stage_pixel_bytes",
+    "SENSOR_CHUNK_FRAMES",
+    "RENDER_CHUNK_FRAMES",
+    "TRUTH_BAND_LINES",
+]
+
+#: Frames exposed per vectorised sensor call (the temporal noise depends on it: fixed).
+SENSOR_CHUNK_FRAMES = DEFAULT_CHUNK_FRAMES
+#: Frames rendered per engine call (a multiple of the sensor chunk).
+RENDER_CHUNK_FRAMES = 64
+#: Output lines per band of the reflectance truth.
+TRUTH_BAND_LINES = 256
+
+# --- the pass's variables ------------------------------------------------------------------------
+
+#: dimensions of a variable per stage, and of a fused image
+STAGE_DIMS = ("stage", "line", "column")
+IMAGE_DIMS = ("line", "column")
+#: dtype of the stage word: :func:`bench_sim.sensor.model.word_dtype` of ``dtdi.beta_bits`` in a
+#: pass, the widest word (``beta = 32``) where stored for any ``beta`` (a data set)
+WORD = "word"
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One variable of a pass.
+
+    Attributes
+    ----------
+    name
+        Variable name in the dataset and the files.
+    dims
+        :data:`STAGE_DIMS` or :data:`IMAGE_DIMS`.
+    dtype
+        numpy dtype name, or :data:`WORD` (the stage word, its width set by ``beta``).
+    units
+        Units (``"1"``: dimensionless).
+    doc
+        Long name (the dataset's ``long_name`` attribute).
+    truth
+        Computed only with the truth (``run_pass(..., truth=True)``).
+    """
+
+    name: str
+    dims: tuple[str, ...]
+    dtype: str
+    units: str
+    doc: str
+    truth: bool = False
+
+    def array_dtype(self, beta_bits: int) -> np.dtype:
+        """The dtype of the array in a pass of ``beta_bits``-bit words."""
+        return word_dtype(beta_bits) if self.dtype == WORD else np.dtype(self.dtype)
+
+    @property
+    def stored_dtype(self) -> str:
+        """The dtype name that holds the variable for any ``beta`` (a data set's arrays)."""
+        return self.array_dtype(BETA_BITS_MAX).name
+
+
+#: The one table of the pass's variables, in dataset order.
+PASS_VARIABLES: tuple[Variable, ...] = (
+    Variable("dn", STAGE_DIMS, WORD, "DN", "DTDI stage word (paper eq. 1-2, 4)"),
+    Variable("mean_dn", STAGE_DIMS, "float64", "DN", "expectation of the stage word before the word clips",
+             truth=True),
+    Variable("photons", STAGE_DIMS, "float64", "photons",
+             "mean photons collected by the stage pixel (sum over its m rows)", truth=True),
+    Variable("reflectance", STAGE_DIMS, "float32", "1",
+             "target reflectance integrated by the stage pixel's footprints", truth=True),
+    Variable("clipped", STAGE_DIMS, "bool", "1",
+             "a read hit full well or the ADC top, or the word hit 2**beta - 1", truth=True),
+    Variable("gamma_hdr", IMAGE_DIMS, "float32", "DN",
+             "Gamma_HDR, paper eq. 11, in stage-mu2 units, pedestal removed"),
+    Variable("gamma_hdr_source", IMAGE_DIMS, "int16", "1", "stage each Gamma_HDR pixel came from"),
+)
+#: name -> its :class:`Variable` of :data:`PASS_VARIABLES`
+VARIABLES_BY_NAME: dict[str, Variable] = {v.name: v for v in PASS_VARIABLES}
+
+
+def pass_variables(dims: tuple[str, ...] | None = None, *, truth: bool = True) -> tuple[Variable, ...]:
+    """The variables of :data:`PASS_VARIABLES` with dimensions ``dims`` (default: all), without
+    the truth when ``truth`` is false."""
+    return tuple(v for v in PASS_VARIABLES if (dims is None or v.dims == dims) and (truth or not v.truth))
+
+
+def stage_pixel_bytes(beta_bits: int | None, *, truth: bool) -> int:
+    """Bytes per stage pixel of the stage variables [bytes]: in a pass of ``beta_bits``-bit
+    words, or as stored for any ``beta`` (``None``)."""
+    beta = BETA_BITS_MAX if beta_bits is None else beta_bits
+    return sum(v.array_dtype(beta).itemsize for v in pass_variables(STAGE_DIMS, truth=truth))
+
+
+def check_stages(
+    stages: Iterable[int] | str, rows: int, what: str = "stages", given: str | None = None
+) -> tuple[int, ...]:
+    """Validate requested stages: integers in ``1 .. rows``, no duplicates; ``"all"`` means
+    ``1 .. rows``. Returns them sorted; raises :class:`BenchSimError` (one line) otherwise,
+    quoting ``given`` (what the user wrote, e.g. the ``--stages`` text) or the stages."""
+    if isinstance(stages, str):
+        if stages.strip() == "all":
+            return tuple(range(1, rows + 1))
+        raise BenchSimError(f"{what} = {stages!r}: expected a list of stages or 'all'")
+    try:
+        items = list(stages)
+    except TypeError:
+        raise BenchSimError(f"{what} = {stages!r}: expected a list of stages or 'all'") from None
+    shown = given if given is not None else repr(items)
+    if not items:
+        raise BenchSimError(f"{what}: at least one stage is needed")
+    out = []
+    for m in items:
+        if isinstance(m, bool) or not isinstance(m, int | np.integer):
+            raise BenchSimError(f"{what} = {shown}: {m!r} is not an integer stage")
+        out.append(int(m))
+    dup = sorted({m for m in out if out.count(m) > 1})
+    if dup:
+        raise BenchSimError(f"{what} = {shown}: stage {dup[0]} is given twice (each stage once)")
+    bad = [m for m in out if not 1 <= m <= rows]
+    if bad:
+        raise BenchSimError(f"{what} = {shown}: stage {bad[0]} outside 1..{rows} (sensor.rows = {rows})")
+    return tuple(sorted(out))
+
+
+@dataclass
+class PassResult:
+    """What :func:`run_pass` returns.
+
+    Attributes
+    ----------
+    dataset
+        The simulation (see the module docstring); without ``mean_dn``, ``photons``,
+        ``reflectance`` and ``clipped`` when run with ``truth=False``. Built when first read
+        (a caller that only needs ``stage_dn`` does not import xarray).
+    stage_dn
+        Stage ``m`` -> (lines, N) stage words, ``uint16`` for ``beta <= 16`` (the default 12),
+        else ``uint32`` (:func:`bench_sim.sensor.model.word_dtype`; the arrays behind
+        ``dataset.dn``).
+    setup
+        The render set-up (geometry, target grid and panel, engine info, backend).
+    truth
+        Whether the pass computed the truth (``dataset`` then has ``mean_dn``, ``photons``,
+        ``reflectance``, ``clipped``); reading it does not build the dataset.
+    timings_s
+        Seconds per step: ``render_setup``; ``render_frames``, ``sensor_dtdi``, ``truth``
+        (busy time of each; rendering runs ahead in its own thread and the chunks are exposed
+        on the thread pool, so they overlap); ``pass_wall``, the wall time of the streaming
+        pass they share.
+    """
+
+    stage_dn: dict[int, np.ndarray]
+    setup: RenderSetup
+    timings_s: dict[str, float] = field(default_factory=dict)
+    make_dataset: Callable[[], xr.Dataset] | None = field(default=None, repr=False)
+    truth: bool = False
+
+    @functools.cached_property
+    def dataset(self) -> xr.Dataset:
+        if self.make_dataset is None:
+            raise BenchSimError("PassResult: no dataset")
+        return self.make_dataset()
+
+
+def _pedestal_dn(cfg: BenchConfig) -> float:
+    return float(getattr(cfg.dtdi, "pedestal_dn", 0.0))
+
+
+# --- the steps of a pass -------------------------------------------------------------------------
+
+
+class _StageTruth:
+    """The truth of a pass, accumulated chunk by chunk (:mod:`bench_sim.sensor.stage_truth`):
+    ``photons``, ``mean_dn``, ``clipped`` per stage line, ``reflectance`` per band of lines."""
+
+    def __init__(self, cfg: BenchConfig, setup: RenderSetup, fp: FixedPattern, st: tuple[int, ...]) -> None:
+        self.cfg, self.setup, self.st = cfg, setup, st
+        self.lines, n_cols = cfg.lines, cfg.sensor.columns
+        beta, ped = cfg.dtdi.beta_bits, _pedestal_dn(cfg)
+        shape = (len(st), self.lines, n_cols)
+        self.arrays = {v.name: np.empty(shape, dtype=v.array_dtype(beta)) for v in pass_variables(STAGE_DIMS)
+                       if v.truth}
+        self.sums = StageSums(n_cols, st, 3)
+        self.done = dict.fromkeys(st, 0)
+        self.refl_done = 0
+        t_int = setup.geom.t_int_s
+        self.offsets = {
+            m: stage_dark_offset_dn(
+                cfg.sensor, fp, t_int, m, subtract_black=cfg.dtdi.subtract_black, pedestal_dn=ped
+            )
+            for m in st
+        }
+        self.footprints = row_footprints(cfg, setup.geom, setup.grid, st[-1])
+        self.gain = fp.prnu_gain
+
+    def push(self, got: Exposed) -> None:
+        """Add one exposed chunk (its photons and saturated reads)."""
+        photons, mean_dn, clipped = self.arrays["photons"], self.arrays["mean_dn"], self.arrays["clipped"]
+        ph = got.photons
+        stack = np.empty((ph.shape[0], self.st[-1], 3, ph.shape[2]), dtype=np.float64)
+        stack[:, :, 0] = ph
+        np.multiply(ph, self.gain, out=stack[:, :, 1])
+        stack[:, :, 2] = got.saturated
+        for frame in stack:
+            for m, line in self.sums.push(frame).items():
+                s, j = self.st.index(m), self.done[m]
+                if j < self.lines:
+                    photons[s, j] = line[0]
+                    mean_dn[s, j] = stage_mean_dn(line[1], self.cfg.sensor, self.offsets[m])
+                    clipped[s, j] = line[2] > 0
+                    self.done[m] = j + 1
+        complete = min(self.done.values())
+        if complete - self.refl_done >= TRUTH_BAND_LINES or complete == self.lines:
+            self._reflectance_band(complete)
+
+    def _reflectance_band(self, upto: int) -> None:
+        grid, q, refl = self.setup.grid, self.setup.grid.q, self.arrays["reflectance"]
+        start = self.refl_done
+        while start < upto:
+            stop = min(start + TRUTH_BAND_LINES, upto)
+            r0, r1 = reflectance_rows(self.footprints, q, self.st[-1], start, stop)
+            band = grid.rows(r0, r1)
+            for s, m in enumerate(self.st):
+                refl[s, start:stop] = stage_reflectance(band, q, self.footprints, m, start, stop, row0=r0)
+            start = stop
+        self.refl_done = start
+
+    def finish(self, dn_all: np.ndarray) -> None:
+        """Mark the words that hit the top of the word as clipped."""
+        self.arrays["clipped"] |= dn_all >= full_scale_dn(self.cfg.dtdi.beta_bits) - 1
+
+
+def _rendered(setup: RenderSetup, n_rows: int, timings: dict[str, float]) -> Iterator[np.ndarray]:
+    """The pass's chunks of photon frames (rows ``0 .. n_rows - 1``), rendered a chunk ahead in
+    their own thread (:func:`bench_sim.runtime.parallel.prefetch`)."""
+
+    def rendered() -> Iterator[np.ndarray]:
+        frames_iter = iter_photon_frames(setup, chunk=RENDER_CHUNK_FRAMES)
+        while True:
+            t0 = time.perf_counter()
+            chunk = next(frames_iter, None)
+            timings["render_frames"] += time.perf_counter() - t0
+            if chunk is None:
+                return
+            yield chunk
+
+    for chunk in prefetch(rendered()):
+        yield chunk[:, :n_rows]
+
+
+def _stream(
+    cfg: BenchConfig,
+    setup: RenderSetup,
+    fp: FixedPattern,
+    noise: np.random.SeedSequence,
+    dn: dict[int, np.ndarray],
+    truth: _StageTruth | None,
+    timings: dict[str, float],
+    on_frames: Callable[[int], None] | None,
+) -> None:
+    """The streaming pass: rendered frames through the sensor and DTDI into ``dn`` (stage ->
+    (lines, N) words), and into ``truth``."""
+    st, lines = tuple(dn), cfg.lines
+    done = dict.fromkeys(st, 0)
+    t_pass = time.perf_counter()
+    chunks = iter_stream(
+        _rendered(setup, st[-1], timings), cfg.sensor, cfg.dtdi, setup.geom.t_int_s, st, fp, noise,
+        pedestal_dn=_pedestal_dn(cfg), chunk_frames=SENSOR_CHUNK_FRAMES, saturated=truth is not None,
+    )
+    for got in chunks:
+        t0 = time.perf_counter()
+        for m, block in got.lines.items():
+            take = block[: max(lines - done[m], 0)]
+            dn[m][done[m] : done[m] + len(take)] = take
+            done[m] += len(take)
+        t1 = time.perf_counter()
+        timings["sensor_dtdi"] += got.seconds + t1 - t0
+        if truth is not None:
+            truth.push(got.exposed)
+            timings["truth"] += time.perf_counter() - t1
+        if on_frames is not None:
+            on_frames(got.exposed.photons.shape[0])
+    timings["pass_wall"] = time.perf_counter() - t_pass
+    if min(done.values()) < lines:
+        raise BenchSimError(f"simulate: the pass gave only {min(done.values())} of {lines} lines")
+
+
+def _fused(cfg: BenchConfig, dn: dict[int, np.ndarray]) -> dict[str, np.ndarray]:
+    """``gamma_hdr`` and ``gamma_hdr_source`` (eq. 11 of stages ``fusion.mu1``, ``fusion.mu2``), when both
+    stages are in the pass."""
+    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
+    if not (mu1 in dn and mu2 in dn):
+        return {}
+    ped = _pedestal_dn(cfg)
+    kw = {"pedestal_dn": ped} if ped else {}
+    fused = fuse_dtdi_hdr_eq11(dn[mu1], dn[mu2], mu1=mu1, mu2=mu2, beta=cfg.dtdi.beta_bits, **kw)
+    dtypes = {v.name: v.array_dtype(cfg.dtdi.beta_bits) for v in pass_variables(IMAGE_DIMS)}
+    return {
+        "gamma_hdr": fused.hdr.astype(dtypes["gamma_hdr"]),
+        "gamma_hdr_source": fused.source.astype(dtypes["gamma_hdr_source"]),
+    }
+
+
+def _make_dataset(
+    cfg: BenchConfig,
+    seed: int | np.random.SeedSequence | np.random.Generator,
+    setup: RenderSetup,
+    st: tuple[int, ...],
+    dn_all: np.ndarray,
+    truth: _StageTruth | None,
+) -> xr.Dataset:
+    """The pass's :class:`xarray.Dataset` (see the module docstring)."""
+    import xarray as xr
+
+    lines, n_cols = cfg.lines, cfg.sensor.columns
+    arrays: dict[str, np.ndarray] = {"dn": dn_all, **(truth.arrays if truth is not None else {})}
+    arrays.update(_fused(cfg, {m: dn_all[s] for s, m in enumerate(st)}))
+    coords = {"stage": np.asarray(st, dtype=np.int64), "line": np.arange(lines), "column": np.arange(n_cols)}
+    data: dict[str, Any] = {v.name: (v.dims, arrays[v.name]) for v in PASS_VARIABLES if v.name in arrays}
+    ds = xr.Dataset(data, coords=coords)
+    for name, var in ds.data_vars.items():
+        var.attrs.update(units=VARIABLES_BY_NAME[str(name)].units, long_name=VARIABLES_BY_NAME[str(name)].doc)
+    ds["line"].attrs.update(units="1", long_name="scene line (material at line * delta along the track)")
+    ds["column"].attrs.update(units="1", long_name="sensor column")
+    ds["stage"].attrs.update(units="1", long_name="DTDI stage m (rows summed)")
+    ds.attrs.update(
+        title=f"bench_sim simulation of {cfg.name}",
+        config=config_to_toml_text(cfg),
+        config_sha256=config_sha256(cfg),
+        seed=int(seed) if isinstance(seed, int | np.integer) else -1,
+        version=__version__,
+        engine=str(setup.info["engine"]),
+        variant=str(setup.info["variant"]),
+        beta_bits=int(cfg.dtdi.beta_bits),
+        pedestal_dn=_pedestal_dn(cfg),
+        t_int_s=float(setup.geom.t_int_s),
+        frames=int(setup.frames),
+    )
+    if isinstance(seed, np.random.SeedSequence):
+        ds.attrs.update(seed_entropy=str(seed.entropy), seed_spawn_key=str(list(seed.spawn_key)))
+    if "gamma_hdr" in arrays:
+        ds.attrs.update(mu1=int(cfg.fusion.mu1), mu2=int(cfg.fusion.mu2))
+    return ds
+
+
+def run_pass(
+    cfg: BenchConfig,
+    stages: Iterable[int],
+    seed: int | np.random.SeedSequence | np.random.Generator,
+    *,
+    truth: bool = True,
+    on_frames: Callable[[int], None] | None = None,
+) -> PassResult:
+    """Run one simulation pass: render, expose, accumulate stages and truth, fuse.
+
+    The building block of :func:`bench_sim.workflows.simulate.simulate`, ``reproduce``, sweeps
+    and data sets.
+
+    Parameters
+    ----------
+    cfg
+        The bench; ``cfg.lines`` output lines of ``cfg.sensor.columns`` columns.
+    stages
+        Stages to output, each in ``1 .. sensor.rows`` (validated by :func:`check_stages`).
+    seed
+        Root seed, a ``SeedSequence`` (a sample's or sweep point's stream) or a generator to
+        draw from, consumed in this order: one integer for the renderer (reference engine),
+        the sensor's fixed pattern, then one ``SeedSequence`` of the temporal noise, from which
+        chunk ``c`` of :data:`SENSOR_CHUNK_FRAMES` frames (rows ``0 .. max(stages) - 1``) gets
+        its own generator (:func:`bench_sim.runtime.parallel.chunk_generator`): the result does not
+        depend on the number of threads (``BENCH_SIM_THREADS``).
+    truth
+        Also compute ``mean_dn``, ``photons``, ``reflectance`` and ``clipped``.
+    on_frames
+        Called with the number of frames after every rendered chunk (progress bars).
+    """
+    st = check_stages(stages, cfg.sensor.rows)
+    rng = np.random.default_rng(seed)  # a Generator is used as is
+    n_rows, n_cols = st[-1], cfg.sensor.columns
+    timings = {"render_setup": 0.0, "render_frames": 0.0, "sensor_dtdi": 0.0, "truth": 0.0, "pass_wall": 0.0}
+
+    t0 = time.perf_counter()
+    setup = prepare(cfg, frames_needed(cfg.lines, st), rng)
+    timings["render_setup"] = time.perf_counter() - t0
+    fixed = draw_fixed_pattern(cfg.sensor, rng)
+    noise = seed_sequence(rng)
+    fp = fixed if n_rows == cfg.sensor.rows else fixed.window(n_rows, n_cols)
+    word = VARIABLES_BY_NAME["dn"].array_dtype(cfg.dtdi.beta_bits)
+    dn_all = np.empty((len(st), cfg.lines, n_cols), dtype=word)
+    dn = {m: dn_all[s] for s, m in enumerate(st)}
+    stage_truth = None
+    if truth:
+        t0 = time.perf_counter()
+        stage_truth = _StageTruth(cfg, setup, fp, st)
+        timings["truth"] += time.perf_counter() - t0
+
+    _stream(cfg, setup, fp, noise, dn, stage_truth, timings, on_frames)
+    if stage_truth is not None:
+        t0 = time.perf_counter()
+        stage_truth.finish(dn_all)
+        timings["truth"] += time.perf_counter() - t0
+    make = functools.partial(_make_dataset, cfg, seed, setup, st, dn_all, stage_truth)
+    return PassResult(dn, setup, timings, make, truth=truth)

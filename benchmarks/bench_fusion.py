@@ -19,7 +19,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.fusion import (
-    TRA_METHODS,
+    TONEMAP_METHODS,
     fuse_dtdi_hdr_eq11,
     fuse_stages_highest_unsaturated,
     fuse_stages_inverse_variance,
@@ -72,7 +72,7 @@ def main() -> None:
     ]
     cases += [
         (f"Gamma_TRA {m}", lambda m=m: tone_map(hdr.hdr, m, full_scale_dn=hdr.full_scale_dn))
-        for m in TRA_METHODS
+        for m in TONEMAP_METHODS
     ]
     print(f"stage images {a.lines} x {a.columns}, beta 12, stages 10 / 80; best of {a.repeat}")
     base = _best_ms(cases[0][1], a.repeat)

@@ -2,7 +2,7 @@
 
 Each run is a ``bench-sim`` command in a child process; its peak resident memory is the
 child's ``ru_maxrss`` (``os.wait4``) and its output size the bytes under ``--out``. The
-estimates (:mod:`bench_sim.runtime.resources`) should be upper bounds within about 2.5x: a ratio below 1
+estimates (:mod:`bench_sim.workflows.estimates`) should be upper bounds within about 2.5x: a ratio below 1
 means a run could be let through that does not fit, far above 2.5 that a run could be refused
 that would.
 
@@ -19,17 +19,17 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_sim.config import DEFAULT_CONFIG_PATH, load_config
+from bench_sim.config import DEFAULT_CONFIG_PATH, load_config, quick_config
 from bench_sim.io import format_bytes
 from bench_sim.measure.ptc import plan_ptc
-from bench_sim.runtime.resources import (
+from bench_sim.workflows.estimates import (
     estimate_fuse,
     estimate_ptc,
     estimate_render,
     estimate_reproduce,
     estimate_simulate,
 )
-from bench_sim.workflows.reproduce.run import FIG3_STAGES, quick_config
+from bench_sim.workflows.reproduce.run import FIG3_STAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "bench_sim"]

@@ -2,7 +2,7 @@
 steps of ``reproduce``, and its peak memory at two numbers of lines.
 
 1. Time: ``simulate`` at the default size (1024 lines x 1024 columns, M = 100) with stages
-   {10, 80}, truth included (``mean_dn``, ``photons``, ``reflectance``, ``clipped``, ``hdr``),
+   {10, 80}, truth included (``mean_dn``, ``photons``, ``reflectance``, ``clipped``, ``gamma_hdr``),
    against the pass ``reproduce`` made before it ran through ``simulate``: render set-up, every
    frame rendered and streamed through the sensor and DTDI for its 21 stages
    (:func:`bench_sim.sensor.stream.sensor_dtdi_pass`). Prints the ratio (target <= 1).
@@ -24,8 +24,8 @@ import tracemalloc
 import numpy as np
 
 from bench_sim.config import load_config, with_overrides
+from bench_sim.pipeline import run_pass
 from bench_sim.workflows.reproduce.run import FIG3_STAGES
-from bench_sim.workflows.simulate import run_pass
 
 STAGES = (10, 80)
 

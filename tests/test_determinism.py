@@ -95,7 +95,7 @@ def test_fuse_is_byte_identical(tmp_path: Path) -> None:
 
 def test_ptc_is_byte_identical_figures_included(tmp_path: Path) -> None:
     from bench_sim.config import load_config
-    from bench_sim.measure.ptc import run_ptc
+    from bench_sim.workflows.ptc_job import run_ptc
 
     cfg = load_config(DEFAULT_CONFIG_PATH)
     runs = []

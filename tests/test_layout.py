@@ -11,6 +11,8 @@
 from __future__ import annotations
 
 import ast
+import importlib
+import re
 import subprocess
 import sys
 from collections import Counter
@@ -54,7 +56,9 @@ def test_own_imports_at_the_top(path: Path) -> None:
     inner = []
     for func in _functions(ast.parse(path.read_text())):
         for node in ast.walk(func):
-            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("bench_sim")):
+            if isinstance(node, ast.ImportFrom) and (
+                node.level or (node.module or "").startswith("bench_sim")
+            ):
                 inner.append(f"line {node.lineno} in {func.name}")
             elif isinstance(node, ast.Import) and any(a.name.startswith("bench_sim") for a in node.names):
                 inner.append(f"line {node.lineno} in {func.name}")
@@ -86,3 +90,68 @@ def test_cli_import_is_light() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "", f"importing bench_sim.cli loads heavy modules: {out.strip()}"
+
+
+def test_architecture_doc_matches_the_tree() -> None:
+    """docs/architecture.md names every folder of bench_sim/, and every path it names exists."""
+    doc = (PACKAGE.parent / "docs" / "architecture.md").read_text()
+    folders = sorted(
+        str(p.relative_to(PACKAGE.parent)) + "/"
+        for p in PACKAGE.rglob("*")
+        if p.is_dir() and p.name != "__pycache__" and "scenes" not in p.relative_to(PACKAGE).parts[1:]
+        and p.parent.name != "scenes"
+    )
+    missing = [f for f in folders if f"`{f}`" not in doc]
+    assert not missing, f"docs/architecture.md does not describe: {missing}"
+    named = set(re.findall(r"`(bench_sim/[\w/.]*)`", doc))
+    gone = sorted(n for n in named if not (PACKAGE.parent / n).exists())
+    assert not gone, f"docs/architecture.md names paths that do not exist: {gone}"
+
+
+def _resolves(dotted: str) -> bool:
+    parts = dotted.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        try:
+            for name in parts[i:]:
+                obj = getattr(obj, name)
+        except AttributeError:
+            return False
+        return True
+    return False
+
+
+def test_documented_names_resolve() -> None:
+    """Every ``bench_sim.x.y`` that the README and docs/ name is a module or attribute that exists."""
+    root = PACKAGE.parent
+    docs = [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
+    bad = sorted(
+        f"{d.relative_to(root)}: {name}"
+        for d in docs
+        for name in set(re.findall(r"\bbench_sim(?:\.[A-Za-z_]\w*)+", d.read_text()))
+        if not _resolves(name)
+    )
+    assert not bad, f"documented names that do not exist: {bad}"
+    paths = sorted(
+        f"{d.relative_to(root)}: {p}"
+        for d in docs
+        for p in set(re.findall(r"(?<![\w/.~])bench_sim/[\w/]*[\w](?:\.py)?", d.read_text()))
+        if not (root / p).exists()
+    )
+    assert not paths, f"documented paths that do not exist: {paths}"
+
+
+def test_public_api() -> None:
+    """``bench_sim.__all__`` names the public API, each name resolves, and the package alone is light."""
+    code = (
+        "import sys, bench_sim\n"
+        "light = not any(m.startswith('bench_sim.') for m in sys.modules)\n"
+        "names = {n: getattr(bench_sim, n) for n in bench_sim.__all__}\n"
+        "print(light, sorted(names), callable(names['simulate']), hasattr(names['dataset'], 'open'))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["True", "['__version__',", "'dataset',", "'load_config',", "'run_pass',",
+                           "'simulate']", "True", "True"]

@@ -14,7 +14,7 @@ from bench_sim.fusion.multistage import (
     fuse_stages_inverse_variance,
 )
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
-from bench_sim.fusion.tonemap import TRA_METHODS, gamma_tra, quantize_display, tone_map
+from bench_sim.fusion.tonemap import TONEMAP_METHODS, gamma_tra, quantize_display, tone_map
 
 __all__ = [
     "FusionResult",
@@ -24,7 +24,7 @@ __all__ = [
     "fuse_stages_inverse_variance",
     "merge_debevec_opencv",
     "merge_mertens_opencv",
-    "TRA_METHODS",
+    "TONEMAP_METHODS",
     "tone_map",
     "gamma_tra",
     "quantize_display",

@@ -136,6 +136,31 @@ def fuse_stages_highest_unsaturated(
     )
 
 
+def _scaled_variances_dn2(
+    ms: tuple[int, ...],
+    mu_e: NDArray[np.float64],
+    conversion_gain_dn_per_e: float,
+    dark_noise_e: float,
+    quantization: bool,
+) -> NDArray[np.float64]:
+    """``var(x_k) = (m_K / m_k)**2 * var_{m_k}`` [DN^2, stage-``m_K`` units] for each stage of
+    ``ms`` (sorted, ``m_K = ms[-1]``), stacked on a first axis; ``mu_e`` [e-] per read."""
+    top = ms[-1]
+    return np.stack(
+        [
+            (top / m) ** 2
+            * stage_variance_dn2(
+                m,
+                mu_e,
+                conversion_gain_dn_per_e=conversion_gain_dn_per_e,
+                dark_noise_e=dark_noise_e,
+                quantization=quantization,
+            )
+            for m in ms
+        ]
+    )
+
+
 def fuse_stages_inverse_variance(
     stages: Mapping[int, ArrayLike],
     *,
@@ -193,19 +218,7 @@ def fuse_stages_inverse_variance(
     mu_e = np.maximum(pilot_dn_per_read, 0.0) / conversion_gain_dn_per_e
     scale = top / m_arr  # to stage-m_K units
     x = stack * scale
-    var_x = np.stack(
-        [
-            (top / m) ** 2
-            * stage_variance_dn2(
-                m,
-                mu_e,
-                conversion_gain_dn_per_e=conversion_gain_dn_per_e,
-                dark_noise_e=dark_noise_e,
-                quantization=quantization,
-            )
-            for m in ms
-        ]
-    )
+    var_x = _scaled_variances_dn2(ms, mu_e, conversion_gain_dn_per_e, dark_noise_e, quantization)
     var_x = np.maximum(var_x, 1e-12)  # noise-free model: equal-variance floor, no division by 0
     with np.errstate(divide="ignore"):
         w = np.where(unsat, 1.0 / var_x, 0.0)
@@ -219,6 +232,6 @@ def fuse_stages_inverse_variance(
         source=np.asarray(ms, dtype=np.int32)[k_hi],
         unit_stage=top,
         full_scale_dn=float(word_clip_dn(beta, "beta")) * top / ms[0],
-        saturated=~any_unsat,
+        saturated=~np.asarray(any_unsat),
         variance=variance,
     )

@@ -112,11 +112,9 @@ def fuse_dtdi_hdr_eq11(
     if g1.shape != g2.shape:
         raise BenchSimError(f"gamma1 shape {g1.shape} differs from gamma2 shape {g2.shape}")
     clip = float(word_clip_dn(beta, "beta"))
-    p1, p2 = (
-        (float(pedestal_dn), float(pedestal_dn))
-        if np.ndim(pedestal_dn) == 0
-        else (float(pedestal_dn[0]), float(pedestal_dn[1]))  # type: ignore[index]
-    )
+    pedestals = np.asarray(pedestal_dn, dtype=np.float64)
+    pair = pedestals if pedestals.ndim else np.stack([pedestals, pedestals])
+    p1, p2 = float(pair[0]), float(pair[1])
     for p in (p1, p2):
         if not 0.0 <= p < clip:
             raise BenchSimError(f"pedestal_dn = {p:g}: must lie in 0..{clip:g} (below the word clip)")

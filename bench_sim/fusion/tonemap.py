@@ -40,16 +40,19 @@ References
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Literal, get_args
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from bench_sim.config import ConfigError
 from bench_sim.errors import BenchSimError
 
 __all__ = [
-    "TraMethod",
-    "TRA_METHODS",
+    "ToneMapMethod",
+    "TONEMAP_METHODS",
+    "check_tonemap_method",
     "tone_map",
     "gamma_tra",
     "quantize_display",
@@ -58,10 +61,6 @@ __all__ = [
     "tra_histeq",
     "tra_opencv",
 ]
-
-TraMethod = Literal["log", "gamma", "histeq", "reinhard", "drago", "mantiuk"]
-TRA_METHODS: tuple[str, ...] = get_args(TraMethod)
-
 
 def _full_scale(x: NDArray[np.float64], full_scale_dn: float | None) -> float:
     if full_scale_dn is None:
@@ -145,6 +144,7 @@ def tra_opencv(
         return x.copy()
     norm = np.maximum(x / big_x, 0.5 / big_x).astype(np.float32)
     rgb = np.ascontiguousarray(np.repeat(norm[..., None], 3, axis=2))
+    op: Any
     if operator == "reinhard":
         op = cv2.createTonemapReinhard(gamma)
     elif operator == "drago":
@@ -155,6 +155,52 @@ def tra_opencv(
         raise BenchSimError(f"operator = {operator!r}: allowed 'reinhard', 'drago', 'mantiuk'")
     out = np.asarray(_quiet_opencv(op.process, rgb), dtype=np.float64)[..., 0]
     return np.clip(np.nan_to_num(out, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class ToneMapMethod:
+    """A ``Gamma_TRA`` transform: ``y = function(hdr, full_scale_dn, gamma)`` in ``0 .. 1`` and
+    its formula (one line, written into the metadata of the outputs that use it)."""
+
+    function: Callable[[ArrayLike, float | None, float], NDArray[np.float64]]
+    formula: str
+
+    def __call__(
+        self, hdr: ArrayLike, full_scale_dn: float | None = None, gamma: float = 2.2
+    ) -> NDArray[np.float64]:
+        return self.function(hdr, full_scale_dn, gamma)
+
+
+#: The display transforms of ``Gamma_TRA``, name -> transform: the one list of them (the names
+#: ``fusion.tra`` and ``bench-sim fuse --tra-method`` take, :func:`tone_map`'s dispatch). Add one
+#: here and everything else follows. ``x`` HDR value, ``X`` full scale, ``y`` display value.
+TONEMAP_METHODS: dict[str, ToneMapMethod] = {
+    "log": ToneMapMethod(lambda x, fs, g: tra_log(x, fs), "y = ln(1 + max(x, 0)) / ln(1 + X)"),
+    "gamma": ToneMapMethod(tra_gamma, "y = clip(x / X, 0, 1) ** (1 / 2.2)"),
+    "histeq": ToneMapMethod(
+        lambda x, fs, g: tra_histeq(x),
+        "y = (C(x) - C(x_min)) / (P - C(x_min)), C = cumulative count of exact values",
+    ),
+    "reinhard": ToneMapMethod(
+        lambda x, fs, g: tra_opencv(x, "reinhard", fs, g),
+        "OpenCV createTonemapReinhard(gamma=2.2) on max(x / X, 0.5 / X) (Reinhard et al. 2005)",
+    ),
+    "drago": ToneMapMethod(
+        lambda x, fs, g: tra_opencv(x, "drago", fs, g),
+        "OpenCV createTonemapDrago(gamma=2.2) on max(x / X, 0.5 / X) (Drago et al. 2003)",
+    ),
+    "mantiuk": ToneMapMethod(
+        lambda x, fs, g: tra_opencv(x, "mantiuk", fs, g),
+        "OpenCV createTonemapMantiuk(gamma=2.2) on max(x / X, 0.5 / X) (Mantiuk et al. 2006)",
+    ),
+}
+
+
+def check_tonemap_method(method: str, key: str = "fusion.tra") -> None:
+    """Refuse a transform name not in :data:`TONEMAP_METHODS`: :class:`~bench_sim.config.ConfigError`
+    ``config error: KEY = 'NAME': must be one of log, gamma, ...`` (one line)."""
+    if method not in TONEMAP_METHODS:
+        raise ConfigError(f"config error: {key} = {method!r}: must be one of {', '.join(TONEMAP_METHODS)}")
 
 
 def tone_map(
@@ -171,21 +217,16 @@ def tone_map(
     hdr
         Fused image [DN], e.g. ``FusionResult.hdr``.
     method
-        One of :data:`TRA_METHODS`.
+        A name of :data:`TONEMAP_METHODS`.
     full_scale_dn
         ``X`` [DN]; ``None``: the image maximum. Not used by ``"histeq"``.
     gamma
         Exponent of ``"gamma"``; display gamma of the OpenCV operators.
     """
-    if method == "log":
-        return tra_log(hdr, full_scale_dn)
-    if method == "gamma":
-        return tra_gamma(hdr, full_scale_dn, gamma)
-    if method == "histeq":
-        return tra_histeq(hdr)
-    if method in ("reinhard", "drago", "mantiuk"):
-        return tra_opencv(hdr, method, full_scale_dn, gamma)  # type: ignore[arg-type]
-    raise BenchSimError(f"tra = {method!r}: allowed {', '.join(TRA_METHODS)}")
+    transform = TONEMAP_METHODS.get(method)
+    if transform is None:
+        raise BenchSimError(f"tra = {method!r}: allowed {', '.join(TONEMAP_METHODS)}")
+    return transform(hdr, full_scale_dn, gamma)
 
 
 def quantize_display(y: ArrayLike, bits: int = 8) -> NDArray[np.unsignedinteger]:

@@ -42,6 +42,7 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,7 +71,7 @@ from bench_sim.sensor.model import (
 __all__ = ["IMAGES", "ImageDR", "ChainDR", "default_levels", "measure_chain_dynamic_range"]
 
 #: The three images of the paper, in the order they are reported.
-IMAGES: tuple[str, ...] = ("gamma1", "gamma2", "hdr")
+IMAGES: tuple[str, ...] = ("gamma1", "gamma2", "gamma_hdr")
 
 
 @dataclass(frozen=True)
@@ -138,19 +139,19 @@ class ChainDR:
     @property
     def gain_over_gamma1_db(self) -> float:
         """``DR(HDR) - DR(Gamma1)`` [dB]: the gain over the better-exposed input's noise floor."""
-        return self.images["hdr"].dr_db - self.images["gamma1"].dr_db
+        return self.images["gamma_hdr"].dr_db - self.images["gamma1"].dr_db
 
     @property
     def gain_over_gamma2_db(self) -> float:
         """``DR(HDR) - DR(Gamma2)`` [dB]."""
-        return self.images["hdr"].dr_db - self.images["gamma2"].dr_db
+        return self.images["gamma_hdr"].dr_db - self.images["gamma2"].dr_db
 
     @property
     def gain_over_gamma2_extrapolated_db(self) -> float:
         """``DR(HDR) - DR(Gamma2)`` [dB] with the extrapolated saturation points (where the
         linear response meets the clipped plateau): the ratio of the clip points that eq. 15
         is about, free of the scatter of the variance maxima (a few tenths of a dB)."""
-        return self.images["hdr"].dr_db_extrapolated - self.images["gamma2"].dr_db_extrapolated
+        return self.images["gamma_hdr"].dr_db_extrapolated - self.images["gamma2"].dr_db_extrapolated
 
     @property
     def gain_over_gamma2_by_construction(self) -> bool:
@@ -173,7 +174,7 @@ class ChainDR:
         above 1.1 times the threshold (``snr_below``, ``snr_above``; NaN where the series has no
         such level), with those levels' photons.
         """
-        hdr = self.images["hdr"]
+        hdr = self.images["gamma_hdr"]
         thr = float(full_scale_dn(self.beta_bits)) - float(self.offsets_dn[self.mu2])
         mean = np.asarray(hdr.mean_dn, dtype=np.float64)
         snr = np.asarray(hdr.snr, dtype=np.float64)
@@ -271,11 +272,94 @@ def _series(
         fused = fuse_dtdi_hdr_eq11(
             g1, g2, mu1=mu1, mu2=mu2, beta=cfg.dtdi.beta_bits, pedestal_dn=(offsets[mu1], offsets[mu2])
         )
-        images = {"gamma1": g1 - offsets[mu1], "gamma2": g2 - offsets[mu2], "hdr": fused.hdr}
+        images = {"gamma1": g1 - offsets[mu1], "gamma2": g2 - offsets[mu2], "gamma_hdr": fused.hdr}
         return {name: mean_var_from_pair(img[:lines], img[lines:]) for name, img in images.items()}
 
     per_level = parallel_map(level, range(levels.size))
     return {name: np.array([r[name] for r in per_level], dtype=np.float64).reshape(-1, 2) for name in IMAGES}
+
+
+def _check_args(cfg: BenchConfig, mu1: int, mu2: int, lines: int, columns: int, saturation: str) -> None:
+    """Refuse bad arguments of :func:`measure_chain_dynamic_range` (one-line :class:`BenchSimError`)."""
+    if not 1 <= mu1 < mu2 <= cfg.sensor.rows:
+        raise BenchSimError(f"mu1 = {mu1}, mu2 = {mu2}: need 1 <= mu1 < mu2 <= sensor.rows")
+    if not (isinstance(lines, int) and lines >= 1 and isinstance(columns, int) and columns >= 1):
+        raise BenchSimError(f"lines = {lines!r}, columns = {columns!r}: need integers >= 1")
+    if lines * columns < 2 or columns > cfg.sensor.columns:
+        raise BenchSimError(f"lines x columns = {lines} x {columns}: need >= 2 pixels within the sensor")
+    if saturation not in ("extrapolated", "interpolated", "max_variance"):
+        raise BenchSimError(
+            f"saturation = {saturation!r}: allowed 'extrapolated', 'interpolated', 'max_variance'"
+        )
+
+
+def _refine(
+    run: Callable[[np.ndarray, int], dict[str, np.ndarray]],
+    p: np.ndarray,
+    stats: dict[str, np.ndarray],
+    refine_rounds: int,
+    refine_points: int,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Rounds of ``refine_points`` extra levels between the neighbours of each image's variance
+    maximum; ``run(levels, r)`` measures round ``r``'s levels. Returns all levels (sorted) and
+    their statistics."""
+    for r in range(1, refine_rounds + 1):
+        extra: list[np.ndarray] = []
+        for name in IMAGES:
+            i = int(np.argmax(stats[name][:, 1]))
+            lo, hi = p[max(i - 1, 0)], p[min(i + 1, p.size - 1)]
+            if hi > lo:
+                extra.append(np.linspace(lo, hi, refine_points + 2)[1:-1])
+        new = np.setdiff1d(np.unique(np.concatenate(extra)), p) if extra else np.array([])
+        if not new.size:
+            break
+        more = run(new, r)
+        allp = np.concatenate([p, new])
+        order = np.argsort(allp, kind="stable")
+        p = allp[order]
+        stats = {k: np.concatenate([stats[k], more[k]])[order] for k in IMAGES}
+    return p, stats
+
+
+def _image_dr(p: np.ndarray, stats: np.ndarray, saturation: SaturationMethod) -> ImageDR:
+    """One image's DR from its series (``stats``: (levels, 2) mean [DN], variance [DN^2])."""
+    mean = stats[:, 0]
+    std = np.sqrt(np.maximum(stats[:, 1], 0.0))
+    dark = float(mean[0])
+    main = dynamic_range_from_series(p, mean, std, dark_signal=dark, saturation=saturation)
+    ext = dynamic_range_from_series(p, mean, std, dark_signal=dark, saturation="extrapolated")
+    return ImageDR(
+        dr_db=main.dr_db,
+        photons_min=main.photons_min,
+        photons_sat=main.photons_sat,
+        signal_sat_dn=main.signal_sat,
+        dr_db_extrapolated=ext.dr_db,
+        photons_sat_extrapolated=ext.photons_sat,
+        mean_dn=mean,
+        temporal_std_dn=std,
+        snr=snr_versus_signal(mean, std, dark)[1],
+    )
+
+
+def _model(cfg: BenchConfig, mu1: int, mu2: int, pedestal: float) -> tuple[dict[int, bool], dict[str, float]]:
+    """Where each stage clips (on the word, below the pixel's clip, or on the pixel) and the
+    sensor model's DR [dB] per image (:mod:`bench_sim.sensor.model`)."""
+    t = cfg.timing.t_int_s
+    clips = {
+        m: stage_clips_on_word(
+            cfg.sensor, m, beta_bits=cfg.dtdi.beta_bits, subtract_black=cfg.dtdi.subtract_black,
+            pedestal_dn=pedestal,
+        )
+        for m in (mu1, mu2)
+    }
+    snr1 = {m: stage_snr1_photons(cfg.sensor, t, m) for m in (mu1, mu2)}
+    sat = {m: _stage_sat(cfg, m, pedestal) for m in (mu1, mu2)}
+    model = {
+        "gamma1": 20 * np.log10(sat[mu1] / snr1[mu1]),
+        "gamma2": 20 * np.log10(sat[mu2] / snr1[mu2]),
+        "gamma_hdr": 20 * np.log10(sat[mu1] / snr1[mu2]),
+    }
+    return clips, {k: float(v) for k, v in model.items()}
 
 
 def measure_chain_dynamic_range(
@@ -320,16 +404,7 @@ def measure_chain_dynamic_range(
     """
     mu1 = cfg.fusion.mu1 if mu1 is None else int(mu1)
     mu2 = cfg.fusion.mu2 if mu2 is None else int(mu2)
-    if not 1 <= mu1 < mu2 <= cfg.sensor.rows:
-        raise BenchSimError(f"mu1 = {mu1}, mu2 = {mu2}: need 1 <= mu1 < mu2 <= sensor.rows")
-    if not (isinstance(lines, int) and lines >= 1 and isinstance(columns, int) and columns >= 1):
-        raise BenchSimError(f"lines = {lines!r}, columns = {columns!r}: need integers >= 1")
-    if lines * columns < 2 or columns > cfg.sensor.columns:
-        raise BenchSimError(f"lines x columns = {lines} x {columns}: need >= 2 pixels within the sensor")
-    if saturation not in ("extrapolated", "interpolated", "max_variance"):
-        raise BenchSimError(
-            f"saturation = {saturation!r}: allowed 'extrapolated', 'interpolated', 'max_variance'"
-        )
+    _check_args(cfg, mu1, mu2, lines, columns, saturation)
     pedestal = measurement_pedestal_dn(cfg, (mu1, mu2))
     offsets = measurement_offsets_dn(cfg, (mu1, mu2), pedestal)
     if levels is None:
@@ -340,60 +415,17 @@ def measure_chain_dynamic_range(
     rng = np.random.default_rng(seed)
     fixed = draw_fixed_pattern(cfg.sensor, rng)
     noise = seed_sequence(rng)  # series r: levels' streams under (noise, r)
-    args = (fixed, lines, columns, pedestal, offsets)
-    stats = _series(cfg, mu1, mu2, p, child_sequence(noise, 0), *args)
+
+    def run(at: np.ndarray, r: int) -> dict[str, np.ndarray]:
+        return _series(cfg, mu1, mu2, at, child_sequence(noise, r), fixed, lines, columns, pedestal, offsets)
+
+    stats = run(p, 0)
     if saturation != "extrapolated":
-        for r in range(1, refine_rounds + 1):
-            extra: list[np.ndarray] = []
-            for name in IMAGES:
-                i = int(np.argmax(stats[name][:, 1]))
-                lo, hi = p[max(i - 1, 0)], p[min(i + 1, p.size - 1)]
-                if hi > lo:
-                    extra.append(np.linspace(lo, hi, refine_points + 2)[1:-1])
-            new = np.setdiff1d(np.unique(np.concatenate(extra)), p) if extra else np.array([])
-            if not new.size:
-                break
-            more = _series(cfg, mu1, mu2, new, child_sequence(noise, r), *args)
-            allp = np.concatenate([p, new])
-            order = np.argsort(allp, kind="stable")
-            p = allp[order]
-            stats = {k: np.concatenate([stats[k], more[k]])[order] for k in IMAGES}
-    images: dict[str, ImageDR] = {}
-    for name in IMAGES:
-        mean = stats[name][:, 0]
-        std = np.sqrt(np.maximum(stats[name][:, 1], 0.0))
-        dark = float(mean[0])
-        main = dynamic_range_from_series(p, mean, std, dark_signal=dark, saturation=saturation)
-        ext = dynamic_range_from_series(p, mean, std, dark_signal=dark, saturation="extrapolated")
-        images[name] = ImageDR(
-            dr_db=main.dr_db,
-            photons_min=main.photons_min,
-            photons_sat=main.photons_sat,
-            signal_sat_dn=main.signal_sat,
-            dr_db_extrapolated=ext.dr_db,
-            photons_sat_extrapolated=ext.photons_sat,
-            mean_dn=mean,
-            temporal_std_dn=std,
-            snr=snr_versus_signal(mean, std, dark)[1],
-        )
-    # where each stage clips: on the word (below the pixel's clip) or on the pixel
-    t = cfg.timing.t_int_s
-    clips = {
-        m: stage_clips_on_word(
-            cfg.sensor, m, beta_bits=cfg.dtdi.beta_bits, subtract_black=cfg.dtdi.subtract_black,
-            pedestal_dn=pedestal,
-        )
-        for m in (mu1, mu2)
-    }
-    snr1 = {m: stage_snr1_photons(cfg.sensor, t, m) for m in (mu1, mu2)}
-    sat = {m: _stage_sat(cfg, m, pedestal) for m in (mu1, mu2)}
-    model = {
-        "gamma1": 20 * np.log10(sat[mu1] / snr1[mu1]),
-        "gamma2": 20 * np.log10(sat[mu2] / snr1[mu2]),
-        "hdr": 20 * np.log10(sat[mu1] / snr1[mu2]),
-    }
+        p, stats = _refine(run, p, stats, refine_rounds, refine_points)
+    images = {name: _image_dr(p, stats[name], saturation) for name in IMAGES}
+    clips, model = _model(cfg, mu1, mu2, pedestal)
     return ChainDR(
-        mu1=mu1, mu2=mu2, beta_bits=cfg.dtdi.beta_bits, adc_bits=cfg.sensor.adc_bits, t_int_s=t,
-        lines=lines, columns=columns, pedestal_dn=pedestal, offsets_dn=offsets, photons=p,
-        images=images, stage_clips_on_word=clips, model_dr_db={k: float(v) for k, v in model.items()},
+        mu1=mu1, mu2=mu2, beta_bits=cfg.dtdi.beta_bits, adc_bits=cfg.sensor.adc_bits,
+        t_int_s=cfg.timing.t_int_s, lines=lines, columns=columns, pedestal_dn=pedestal, offsets_dn=offsets,
+        photons=p, images=images, stage_clips_on_word=clips, model_dr_db=model,
     )

@@ -1,4 +1,4 @@
-"""Metrics of one simulation pass (a :class:`~bench_sim.workflows.simulate.PassResult` and its
+"""Metrics of one simulation pass (a :class:`~bench_sim.pipeline.PassResult` and its
 eq. 11 fusion): eq. 16-18 (omega of ``Gamma1``, ``Gamma2``, ``Gamma_HDR``), saturated fractions,
 the darkest and brightest wedge patches (spatial SNR, level, clipping) and the paper's
 qualitative claims. ``reproduce`` and ``sweep`` both report them.
@@ -19,7 +19,10 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
-from bench_sim.metrics.histogram import Eq18Result
+from bench_sim.fusion.common import FusionResult
+from bench_sim.metrics.histogram import Eq18Result, evaluate_eq18
+from bench_sim.pipeline import PassResult
+from bench_sim.sensor.model import stage_offset_dn
 
 __all__ = ["PassMetrics", "pass_metrics", "patch_slices", "spatial_snr", "SNR_IN_NOISE", "SNR_ROSE"]
 
@@ -80,7 +83,92 @@ def spatial_snr(img: np.ndarray, sl: tuple[slice, slice]) -> float:
     return float(region.mean() / sd) if sd > 0 else float("inf")
 
 
-def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
+def _saturated_fractions(g1: np.ndarray, g2: np.ndarray, fused: FusionResult, clip: int) -> dict[str, float]:
+    """Fraction of each image's pixels at the top of the word (``Gamma_HDR``: where it clips)."""
+    return {
+        "gamma1": float(np.mean(g1 >= clip)),
+        "gamma2": float(np.mean(g2 >= clip)),
+        "gamma_hdr": float(np.mean(fused.saturated)),
+    }
+
+
+def _no_wedge_reason(cfg: BenchConfig, panel: Any, lines: int) -> str:
+    return (
+        f"target.layout = {cfg.target.layout!r} has no wedge patches"
+        if not panel.patches
+        else f"no wedge patch lies wholly inside the {lines} lines x {cfg.sensor.columns} columns"
+    )
+
+
+def _bright_patch(
+    name: str, reflectance: float, sl: tuple[slice, slice], images: dict[str, np.ndarray],
+    s1: np.ndarray, g2: np.ndarray, fused: FusionResult, beta: int,
+) -> dict[str, Any]:
+    """The brightest patch's entry: SNR per image, Gamma1's level, the clipped fractions."""
+    clip = 2**beta - 1
+    snr = {k: spatial_snr(v, sl) for k, v in images.items()}
+    return {
+        "patch": name,
+        "reflectance": reflectance,
+        # a patch clipped flat has no SNR: None
+        "snr": {k: (x if math.isfinite(x) else None) for k, x in snr.items()},
+        "gamma1_mean_dn": float(s1[sl].mean()),
+        "gamma1_fraction_of_phi_fs": float(s1[sl].mean() / 2**beta),
+        "gamma2_saturated_fraction": float(np.mean(g2[sl] >= clip)),
+        "gamma_hdr_saturated_fraction": float(np.mean(fused.saturated[sl])),
+    }
+
+
+def _dark_patch(
+    name: str, reflectance: float, sl: tuple[slice, slice], images: dict[str, np.ndarray],
+    g1: np.ndarray, g2: np.ndarray,
+) -> dict[str, Any]:
+    """The darkest patch's entry: SNR per image and the pixels the word stores as 0 DN."""
+    return {
+        "patch": name,
+        "reflectance": reflectance,
+        "snr": {k: spatial_snr(v, sl) for k, v in images.items()},
+        # pixels of the patch stored as 0 DN (clipped by the word): 0 with a pedestal above the noise
+        "word_zero_fraction": {k: float(np.mean(v[sl] <= 0)) for k, v in (("gamma1", g1), ("gamma2", g2))},
+    }
+
+
+def _qualitative(dark: dict[str, Any], bright: dict[str, Any]) -> dict[str, bool]:
+    """The paper's qualitative claims: "in the noise" is below SNR 2, "out of the noise" the
+    Rose criterion, SNR >= 3."""
+    snr_dark = dark["snr"]
+    return {
+        "stage_mu2_saturates_bright_region": bright["gamma2_saturated_fraction"] > 0.99,
+        "stage_mu1_leaves_darkest_patch_in_noise": snr_dark["gamma1"] < SNR_IN_NOISE,
+        "hdr_keeps_bright_unsaturated": bright["gamma_hdr_saturated_fraction"] == 0.0,
+        "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
+        and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
+    }
+
+
+def _truth_ranges(
+    sim: PassResult, fused: FusionResult, mu1: int, mu2: int, images: dict[str, np.ndarray],
+    wedge: dict[str, tuple[slice, slice]], level: dict[str, float], bright: dict[str, Any],
+) -> tuple[float, dict[str, float | None], dict[str, float]]:
+    """With the pass's truth: the scene range, the range each image captures and its clipped
+    fraction (:class:`PassMetrics`); clears the bright patch's SNR where it is over half clipped."""
+    clip1, clip2 = (sim.dataset["clipped"].sel(stage=m).values for m in (mu1, mu2))
+    clipped = {"gamma1": clip1, "gamma2": clip2, "gamma_hdr": np.where(fused.source == mu1, clip1, clip2)}
+    bsl = wedge[bright["patch"]]
+    for name in images:  # a patch more than half clipped has no SNR either
+        if float(np.mean(clipped[name][bsl])) >= 0.5:
+            bright["snr"][name] = None
+    captured: dict[str, float | None] = {}
+    for name, img in images.items():
+        usable = [
+            level[k] for k, sl in wedge.items()
+            if spatial_snr(img, sl) >= SNR_ROSE and float(np.mean(clipped[name][sl])) < 0.5
+        ]
+        captured[name] = _range_db(usable) if usable else None
+    return _range_db(list(level.values())), captured, {k: float(np.mean(v)) for k, v in clipped.items()}
+
+
+def pass_metrics(cfg: BenchConfig, sim: PassResult, fused: FusionResult) -> PassMetrics:
     """Metrics of a pass's stage images ``fusion.mu1``, ``fusion.mu2`` and their fusion.
 
     Parameters
@@ -88,14 +176,11 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
     cfg
         The bench of the pass.
     sim
-        The :class:`~bench_sim.workflows.simulate.PassResult` (stage words with their pedestal,
+        The :class:`~bench_sim.pipeline.PassResult` (stage words with their pedestal,
         render set-up with the target panel and geometry).
     fused
         :func:`bench_sim.fusion.paper.fuse_dtdi_hdr_eq11` of the two stages, offsets removed.
     """
-    from bench_sim.metrics.histogram import evaluate_eq18
-    from bench_sim.sensor.model import stage_offset_dn
-
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
     lines = cfg.lines
     setup = sim.setup
@@ -104,21 +189,11 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
     s1, s2 = g1 - off1, g2 - off2
     # eq. 16-17 count the values of the stored words; the HDR carries Gamma2's offset likewise
     eq18 = evaluate_eq18(g1, g2, fused.hdr + off2, mu1=mu1, mu2=mu2, beta=beta)
-    clip = 2**beta - 1
     panel = setup.grid.panel
-    sat = {
-        "gamma1": float(np.mean(g1 >= clip)),
-        "gamma2": float(np.mean(g2 >= clip)),
-        "gamma_hdr": float(np.mean(fused.saturated)),
-    }
+    sat = _saturated_fractions(g1, g2, fused, 2**beta - 1)
     wedge = {k: v for k, v in patch_slices(panel, setup.geom, cfg, lines).items() if k.startswith("wedge_")}
     if not wedge:
-        why = (
-            f"target.layout = {cfg.target.layout!r} has no wedge patches"
-            if not panel.patches
-            else f"no wedge patch lies wholly inside the {lines} lines x {cfg.sensor.columns} columns"
-        )
-        return PassMetrics(eq18, sat, None, None, None, why)
+        return PassMetrics(eq18, sat, None, None, None, _no_wedge_reason(cfg, panel, lines))
     refl = {p.name: p.reflectance for p in panel.patches}
     # the darkest and brightest patches in the scene as lit: lowest / highest mean photons (the
     # truth) or mean of Gamma_HDR
@@ -128,54 +203,13 @@ def pass_metrics(cfg: BenchConfig, sim: Any, fused: Any) -> PassMetrics:
     darkest = min(wedge, key=level.__getitem__)
     brightest = max(wedge, key=level.__getitem__)
     images = {"gamma1": s1, "gamma2": s2, "gamma_hdr": fused.hdr}
-    snr_dark = {k: spatial_snr(v, wedge[darkest]) for k, v in images.items()}
-    bsl = wedge[brightest]
-    snr_bright = {k: spatial_snr(v, bsl) for k, v in images.items()}
-    bright = {
-        "patch": brightest,
-        "reflectance": refl[brightest],
-        # a patch clipped flat has no SNR: None
-        "snr": {k: (x if math.isfinite(x) else None) for k, x in snr_bright.items()},
-        "gamma1_mean_dn": float(s1[bsl].mean()),
-        "gamma1_fraction_of_phi_fs": float(s1[bsl].mean() / 2**beta),
-        "gamma2_saturated_fraction": float(np.mean(g2[bsl] >= clip)),
-        "gamma_hdr_saturated_fraction": float(np.mean(fused.saturated[bsl])),
-    }
-    dark = {
-        "patch": darkest,
-        "reflectance": refl[darkest],
-        "snr": snr_dark,
-        # pixels of the patch stored as 0 DN (clipped by the word): 0 with a pedestal above the noise
-        "word_zero_fraction": {
-            k: float(np.mean(v[wedge[darkest]] <= 0)) for k, v in (("gamma1", g1), ("gamma2", g2))
-        },
-    }
-    # "in the noise": below SNR 2; "out of the noise": the Rose criterion, SNR >= 3
-    qualitative = {
-        "stage_mu2_saturates_bright_region": bright["gamma2_saturated_fraction"] > 0.99,
-        "stage_mu1_leaves_darkest_patch_in_noise": snr_dark["gamma1"] < SNR_IN_NOISE,
-        "hdr_keeps_bright_unsaturated": bright["gamma_hdr_saturated_fraction"] == 0.0,
-        "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
-        and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
-    }
+    dark = _dark_patch(darkest, refl[darkest], wedge[darkest], images, g1, g2)
+    bright = _bright_patch(brightest, refl[brightest], wedge[brightest], images, s1, g2, fused, beta)
+    qualitative = _qualitative(dark, bright)
     if not truth:
         return PassMetrics(eq18, sat, dark, bright, qualitative)
-    clip1, clip2 = (sim.dataset["clipped"].sel(stage=m).values for m in (mu1, mu2))
-    clipped = {"gamma1": clip1, "gamma2": clip2, "gamma_hdr": np.where(fused.source == mu1, clip1, clip2)}
-    for name in images:  # a patch more than half clipped has no SNR either
-        if float(np.mean(clipped[name][bsl])) >= 0.5:
-            bright["snr"][name] = None
-    captured = {}
-    for name, img in images.items():
-        usable = [
-            level[k] for k, sl in wedge.items()
-            if spatial_snr(img, sl) >= SNR_ROSE and float(np.mean(clipped[name][sl])) < 0.5
-        ]
-        captured[name] = _range_db(usable) if usable else None
-    return PassMetrics(
-        eq18, sat, dark, bright, qualitative, None, _range_db(list(level.values())), captured,
-        {k: float(np.mean(v)) for k, v in clipped.items()},
-    )
+    scene_db, captured, clipped = _truth_ranges(sim, fused, mu1, mu2, images, wedge, level, bright)
+    return PassMetrics(eq18, sat, dark, bright, qualitative, None, scene_db, captured, clipped)
 
 
 def _range_db(levels: list[float]) -> float:

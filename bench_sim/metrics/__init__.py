@@ -6,5 +6,6 @@
   documented binning, and the evaluation of eq. 18.
 * :mod:`bench_sim.metrics.snr` - SNR versus signal from image pairs (series or uniform patches).
 * :mod:`bench_sim.metrics.emva1288` - EMVA 1288 R4 photon-transfer analysis (K, QE, saturation,
-  ``mu_p.min``, measured dynamic range).
+  ``mu_p.min``, measured dynamic range); its measurement and fit steps are in
+  :mod:`bench_sim.metrics.photon_transfer`.
 """

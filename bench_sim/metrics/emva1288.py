@@ -28,6 +28,11 @@ serves any image type: a DTDI stage, or a fused HDR image whose gain is not a si
 The saturation point is located between the levels (parabolic refinement of the variance
 maximum) so that dynamic ranges can be compared to a few tenths of a dB even on a coarse grid.
 
+The steps from measured images to fitted quantities (pair statistics, ``K`` and responsivity
+fits, dark noise, saturation point, stack statistics) live in
+:mod:`bench_sim.metrics.photon_transfer`; this module builds the sensitivity, SNR and dynamic
+range on them and re-exports them, so ``bench_sim.metrics.emva1288`` is the one import.
+
 References
 ----------
 .. [EMVA] EMVA Standard 1288, Release 4.0 Linear: Standard for Characterization of Image
@@ -40,11 +45,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 
 from bench_sim.errors import BenchSimError
+from bench_sim.metrics.photon_transfer import (
+    LINEAR_FIT_FRACTION,
+    SaturationMethod,
+    SaturationPoint,
+    as_1d,
+    dark_temporal_noise_e,
+    fit_conversion_gain,
+    fit_responsivity,
+    mean_var_from_pair,
+    saturation_point,
+    series_from_pairs,
+    spatial_nonuniformity,
+    stack_mean_var,
+)
 
 __all__ = [
     "SaturationMethod",
@@ -67,235 +85,6 @@ __all__ = [
     "spatial_nonuniformity",
     "LINEAR_FIT_FRACTION",
 ]
-
-SaturationMethod = Literal["max_variance", "interpolated", "extrapolated"]
-
-#: Upper end of the linear range used for the K and responsivity fits, as a fraction of the
-#: saturation signal (EMVA 1288 R4: 0 .. 70 %).
-LINEAR_FIT_FRACTION = 0.7
-
-
-def _as1d(name: str, a: np.ndarray | list[float], n: int | None = None) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64).ravel()
-    if n is not None and arr.size != n:
-        raise BenchSimError(f"{name}: expected {n} values, got {arr.size}")
-    if not np.all(np.isfinite(arr)):
-        raise BenchSimError(f"{name}: values must be finite")
-    return arr
-
-
-def mean_var_from_pair(image_a: np.ndarray, image_b: np.ndarray) -> tuple[float, float]:
-    """Temporal mean and variance of one level from two images (EMVA 1288 R4).
-
-    Parameters
-    ----------
-    image_a, image_b
-        Two images of the same level, same shape [DN].
-
-    Returns
-    -------
-    (mu_y, sigma_y2)
-        ``mu_y = (<A> + <B>) / 2`` [DN] and
-        ``sigma_y**2 = <((A - <A>) - (B - <B>))**2> / 2`` [DN^2].
-    """
-    a = np.asarray(image_a, dtype=np.float64)
-    b = np.asarray(image_b, dtype=np.float64)
-    if a.shape != b.shape or a.size < 2:
-        raise BenchSimError(f"image pair shapes {a.shape} and {b.shape}: must be equal, >= 2 pixels")
-    ma, mb = float(a.mean()), float(b.mean())
-    diff = (a - ma) - (b - mb)
-    return 0.5 * (ma + mb), 0.5 * float(np.mean(diff * diff))
-
-
-def series_from_pairs(pairs: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Mean [DN] and temporal variance [DN^2] of each level of a series of image pairs."""
-    mv = np.array([mean_var_from_pair(a, b) for a, b in pairs], dtype=np.float64).reshape(-1, 2)
-    return mv[:, 0], mv[:, 1]
-
-
-def _fit_through_origin(x: np.ndarray, y: np.ndarray) -> float:
-    den = float(np.sum(x * x))
-    if den <= 0:
-        raise BenchSimError("linear fit: no points with signal in the linear range")
-    return float(np.sum(x * y) / den)
-
-
-def _linear_mask(signal: np.ndarray, saturation_signal: float, fraction: float) -> np.ndarray:
-    mask = (signal > 0) & (signal <= fraction * saturation_signal)
-    if int(mask.sum()) < 2:
-        raise BenchSimError(
-            f"linear fit: fewer than 2 levels between 0 and {fraction:.0%} of the saturation "
-            f"signal {saturation_signal:.6g} (add light levels)"
-        )
-    return mask
-
-
-def fit_conversion_gain(
-    mean_dn: np.ndarray,
-    var_dn: np.ndarray,
-    dark_mean_dn: float,
-    dark_var_dn: float,
-    saturation_signal_dn: float,
-    fraction: float = LINEAR_FIT_FRACTION,
-) -> float:
-    """Overall system gain ``K`` [DN/e-] from the photon-transfer curve (EMVA 1288 R4, eq. 7).
-
-    Least-squares slope through the origin of ``sigma_y**2 - sigma_y.dark**2`` versus
-    ``mu_y - mu_y.dark`` over the levels with ``0 < mu_y - mu_y.dark <= fraction * mu_y.sat``.
-
-    Parameters
-    ----------
-    mean_dn, var_dn
-        Temporal mean [DN] and variance [DN^2] of the bright levels.
-    dark_mean_dn, dark_var_dn
-        The same for the dark level.
-    saturation_signal_dn
-        Dark-subtracted saturation signal ``mu_y.sat`` [DN].
-    fraction
-        Upper end of the fit range (EMVA: 0.7).
-    """
-    mean = _as1d("mean_dn", mean_dn)
-    var = _as1d("var_dn", var_dn, mean.size)
-    x = mean - dark_mean_dn
-    y = var - dark_var_dn
-    mask = _linear_mask(x, saturation_signal_dn, fraction)
-    return _fit_through_origin(x[mask], y[mask])
-
-
-def fit_responsivity(
-    photons: np.ndarray,
-    mean_dn: np.ndarray,
-    dark_mean_dn: float,
-    saturation_signal_dn: float,
-    fraction: float = LINEAR_FIT_FRACTION,
-) -> float:
-    """Responsivity ``R = eta * K`` [DN/photon] (EMVA 1288 R4, eq. 5): slope through the origin
-    of ``mu_y - mu_y.dark`` versus ``mu_p`` over ``0 .. fraction * mu_y.sat``."""
-    p = _as1d("photons", photons)
-    x = _as1d("mean_dn", mean_dn, p.size) - dark_mean_dn
-    mask = _linear_mask(x, saturation_signal_dn, fraction)
-    return _fit_through_origin(p[mask], x[mask])
-
-
-def dark_temporal_noise_e(dark_var_dn: float, k_dn_per_e: float, quantization_var_dn2: float) -> float:
-    """Dark temporal noise in electrons: ``sigma_d = sqrt(sigma_y.dark**2 - sigma_q**2) / K``.
-
-    ``quantization_var_dn2`` is ``1/12`` for one quantised value, ``m/12`` for a DTDI stage that
-    sums ``m`` independently quantised rows. Clamped at 0.
-    """
-    if k_dn_per_e <= 0:
-        raise BenchSimError(f"K = {k_dn_per_e!r}: must be > 0")
-    return math.sqrt(max(float(dark_var_dn) - float(quantization_var_dn2), 0.0)) / float(k_dn_per_e)
-
-
-@dataclass(frozen=True)
-class SaturationPoint:
-    """Where a series saturates.
-
-    Attributes
-    ----------
-    photons
-        Irradiation at saturation ``mu_p.sat`` (the series' photon unit).
-    signal
-        Dark-subtracted mean signal there ``mu_y.sat``.
-    index
-        Level (grid index) with the largest temporal variance.
-    method
-        ``max_variance``, ``interpolated`` or ``extrapolated``.
-    """
-
-    photons: float
-    signal: float
-    index: int
-    method: str
-
-
-def _parabola_vertex(x: np.ndarray, y: np.ndarray) -> float:
-    """x of the vertex of the parabola through three points (unevenly spaced allowed)."""
-    x0, x1, x2 = (float(v) for v in x)
-    y0, y1, y2 = (float(v) for v in y)
-    den = (x0 - x1) * (x0 - x2) * (x1 - x2)
-    a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / den
-    b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / den
-    if a >= 0:  # not a maximum: keep the grid point
-        return x1
-    return -b / (2 * a)
-
-
-def saturation_point(
-    photons: np.ndarray,
-    signal: np.ndarray,
-    temporal_var: np.ndarray,
-    method: SaturationMethod = "interpolated",
-    *,
-    responsivity: float | None = None,
-) -> SaturationPoint:
-    """Saturation point of a series (EMVA 1288 R4: the maximum of the temporal variance).
-
-    Parameters
-    ----------
-    photons
-        Irradiation of each level (e.g. mean photons per pixel), increasing.
-    signal
-        Dark-subtracted mean signal of each level.
-    temporal_var
-        Temporal variance of each level.
-    method
-        ``"max_variance"``: the level with the largest variance (EMVA's definition, quantised to
-        the level grid). ``"interpolated"``: the vertex of the parabola through that level and
-        its two neighbours (clamped to the neighbours); the signal there is interpolated
-        linearly. Its accuracy is a fraction of the level spacing where the peak is resolved;
-        a hard clip collapses the variance within a few per cent of irradiation, so sample
-        the levels at about 1 % spacing near saturation for 0.1 dB. ``"extrapolated"``: the
-        irradiation at which the linear response reaches the clipped plateau,
-        ``mu_p.sat = max(mu_y) / R`` with ``max(mu_y)`` the largest (dark-subtracted) mean
-        signal of the series at or beyond the variance maximum and ``R`` the responsivity
-        (``responsivity``, or a fit over 0..70 % of the saturation signal). It does not depend
-        on the level grid (only on the fit and the plateau) but lies a few per cent above the
-        variance maximum, where noise and fixed-pattern spread start to clip.
-    responsivity
-        Slope of signal versus photons for ``"extrapolated"`` (fitted when None).
-
-    Raises
-    ------
-    BenchSimError
-        Fewer than 3 levels, or the variance peaks at the last level (series not saturated).
-    """
-    p = _as1d("photons", photons)
-    s = _as1d("signal", signal, p.size)
-    v = _as1d("temporal_var", temporal_var, p.size)
-    if p.size < 3:
-        raise BenchSimError(f"saturation: need at least 3 levels, got {p.size}")
-    if np.any(np.diff(p) <= 0):
-        raise BenchSimError("saturation: photons must increase strictly from level to level")
-    i = int(np.argmax(v))
-    if i == p.size - 1:
-        raise BenchSimError(
-            f"saturation: the variance peaks at the brightest level (photons {p[-1]:.6g}); the "
-            "series does not reach saturation (add brighter levels)"
-        )
-    if method == "max_variance":
-        return SaturationPoint(float(p[i]), float(s[i]), i, method)
-    if method not in ("interpolated", "extrapolated"):
-        raise BenchSimError(
-            f"saturation method = {method!r}: allowed 'max_variance', 'interpolated', 'extrapolated'"
-        )
-    if i == 0:
-        p_sat, s_sat = float(p[0]), float(s[0])
-    else:
-        sl = slice(i - 1, i + 2)
-        p_sat = min(max(_parabola_vertex(p[sl], v[sl]), float(p[i - 1])), float(p[i + 1]))
-        s_sat = float(np.interp(p_sat, p[sl], s[sl]))
-    if method == "interpolated":
-        return SaturationPoint(p_sat, s_sat, i, method)
-    r = responsivity
-    if r is None:
-        mask = _linear_mask(s, s_sat, LINEAR_FIT_FRACTION)
-        r = _fit_through_origin(p[mask], s[mask])
-    if r <= 0:
-        raise BenchSimError(f"saturation: responsivity {r!r} must be > 0")
-    plateau = float(np.max(s[i:]))
-    return SaturationPoint(plateau / r, plateau, i, method)
 
 
 def snr_curve(signal: np.ndarray, temporal_std: np.ndarray) -> np.ndarray:
@@ -320,7 +109,7 @@ def photons_at_snr(photons: np.ndarray, snr: np.ndarray, target: float = 1.0) ->
     BenchSimError
         The SNR never reaches ``target``, or already exceeds it at the darkest level.
     """
-    p = _as1d("photons", photons)
+    p = as_1d("photons", photons)
     q = np.asarray(snr, dtype=np.float64).ravel()
     if q.size != p.size:
         raise BenchSimError(f"snr: expected {p.size} values, got {q.size}")
@@ -429,9 +218,9 @@ def dynamic_range_from_series(
         ``mu_p.sat``, ``mu_p.min`` (SNR = 1, interpolated on the measured SNR curve below
         saturation), ``DR`` as a ratio and in dB.
     """
-    p = _as1d("photons", photons)
-    sig = _as1d("mean_signal", mean_signal, p.size) - float(dark_signal)
-    sd = _as1d("temporal_std", temporal_std, p.size)
+    p = as_1d("photons", photons)
+    sig = as_1d("mean_signal", mean_signal, p.size) - float(dark_signal)
+    sd = as_1d("temporal_std", temporal_std, p.size)
     if np.any(sd < 0):
         raise BenchSimError("temporal_std: must be >= 0")
     sat = saturation_point(p, sig, sd * sd, saturation, responsivity=responsivity)
@@ -524,9 +313,9 @@ def analyse_photon_transfer(
     fraction
         Upper end of the linear fit range as a fraction of the saturation signal.
     """
-    p = _as1d("photons", photons)
-    mean = _as1d("mean_dn", mean_dn, p.size)
-    var = _as1d("var_dn", var_dn, p.size)
+    p = as_1d("photons", photons)
+    mean = as_1d("mean_dn", mean_dn, p.size)
+    var = as_1d("var_dn", var_dn, p.size)
     signal = mean - float(dark_mean_dn)
     sat = saturation_point(p, signal, var, "interpolated")
     k = fit_conversion_gain(mean, var, dark_mean_dn, dark_var_dn, sat.signal, fraction)
@@ -564,52 +353,3 @@ def analyse_photon_transfer(
         saturation=sat,
         snr=snr,
     )
-
-
-def stack_mean_var(stack: np.ndarray) -> tuple[float, float, float]:
-    """Mean, spatial variance and temporal variance of a stack of ``L`` images (EMVA 1288 R4).
-
-    The spatial variance is that of the average image ``<y> = (1/L) sum_l y_l`` over the pixels,
-    less the residual temporal variance ``sigma_y**2 / L`` it still holds; ``sigma_y**2`` is the
-    pixel-wise variance over the stack, averaged over the pixels.
-
-    Parameters
-    ----------
-    stack
-        (L, H, W) images of one level, ``L >= 2`` [DN].
-
-    Returns
-    -------
-    (mu_y, s_y2, sigma_y2)
-        Mean [DN], spatial variance [DN^2] (clamped at 0), temporal variance [DN^2].
-    """
-    y = np.asarray(stack, dtype=np.float64)
-    if y.ndim != 3 or y.shape[0] < 2:
-        raise BenchSimError(f"image stack shape {y.shape}: expected (L >= 2, height, width)")
-    n_img = y.shape[0]
-    avg = y.mean(axis=0)
-    temporal = float(np.mean(y.var(axis=0, ddof=1)))
-    spatial = float(avg.var()) - temporal / n_img
-    return float(avg.mean()), max(spatial, 0.0), temporal
-
-
-def spatial_nonuniformity(
-    bright_stack: np.ndarray, dark_stack: np.ndarray, k_dn_per_e: float
-) -> dict[str, float]:
-    """DSNU and PRNU (EMVA 1288 R4 definitions) from a bright and a dark stack.
-
-    ``DSNU = s_y.dark / K`` [e-] and ``PRNU = sqrt(s_y**2 - s_y.dark**2) / (mu_y - mu_y.dark)``
-    (a fraction), with ``s`` the spatial standard deviations of :func:`stack_mean_var`; the
-    bright stack is taken at about 50 % of saturation.
-    """
-    mu_b, s2_b, _ = stack_mean_var(bright_stack)
-    mu_d, s2_d, _ = stack_mean_var(dark_stack)
-    if k_dn_per_e <= 0 or mu_b <= mu_d:
-        raise BenchSimError("spatial nonuniformity: need K > 0 and a bright mean above the dark mean")
-    return {
-        "dark_spatial_std_dn": math.sqrt(s2_d),
-        "bright_spatial_std_dn": math.sqrt(s2_b),
-        "dsnu_e": math.sqrt(s2_d) / k_dn_per_e,
-        "prnu": math.sqrt(max(s2_b - s2_d, 0.0)) / (mu_b - mu_d),
-        "bright_signal_dn": mu_b - mu_d,
-    }

@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import constants
 
 __all__ = [
     "PLANCK_J_S",
@@ -32,9 +31,10 @@ __all__ = [
     "apply_psf",
 ]
 
-#: Planck constant [J s] and speed of light in vacuum [m/s] (CODATA, exact in SI)
-PLANCK_J_S: float = constants.h
-SPEED_OF_LIGHT_M_S: float = constants.c
+#: Planck constant [J s] and speed of light in vacuum [m/s]: exact in the SI since 2019 (the values
+#: of ``scipy.constants.h`` and ``.c``, written out so importing this module does not start scipy)
+PLANCK_J_S: float = 6.62607015e-34
+SPEED_OF_LIGHT_M_S: float = 299792458.0
 
 
 def photon_energy_j(wavelength_m: float) -> float:

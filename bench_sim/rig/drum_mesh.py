@@ -9,16 +9,22 @@ separate meshes so the rim does not smooth the tube's normals. The body carries 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, cast
+
 import numpy as np
-import trimesh
 
 from bench_sim.config import DrumConfig
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["drum_meshes"]
 
 
 def _tube(radius: float, length: float, segments: int) -> trimesh.Trimesh:
     """Open tube around the x axis, ``segments`` facets, with radial vertex normals and UVs."""
+    import trimesh  # lazy: the scene module (and the CLI above it) stays light
+
     n = segments
     phi = np.linspace(0.0, 2.0 * np.pi, n + 1)  # duplicate seam column for UVs
     x = np.array([-0.5 * length, 0.5 * length])
@@ -42,6 +48,8 @@ def _tube(radius: float, length: float, segments: int) -> trimesh.Trimesh:
 
 
 def _cap(radius: float, x: float, segments: int, outward: float) -> trimesh.Trimesh:
+    import trimesh
+
     phi = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
     ring = np.stack([np.full(segments, x), radius * np.cos(phi), radius * np.sin(phi)], axis=1)
     verts = np.concatenate([[[x, 0.0, 0.0]], ring])
@@ -62,9 +70,12 @@ def drum_meshes(drum: DrumConfig) -> dict[str, trimesh.Trimesh]:
         ``body`` (the target-carrying tube), ``caps`` (both end caps), ``axle``, ``mounts`` and,
         if ``drum.bench``, ``bench``. Units: metres.
     """
+    import trimesh
+
     R, L, n = drum.radius_m, drum.length_m, drum.mesh_segments
     parts: dict[str, trimesh.Trimesh] = {"body": _tube(R, L, n)}
-    parts["caps"] = trimesh.util.concatenate([_cap(R, -0.5 * L, n, -1.0), _cap(R, 0.5 * L, n, 1.0)])
+    caps = trimesh.util.concatenate([_cap(R, -0.5 * L, n, -1.0), _cap(R, 0.5 * L, n, 1.0)])
+    parts["caps"] = cast("trimesh.Trimesh", caps)  # concatenate() is typed as returning a Geometry
     axle_len = L + 2.0 * drum.axle_overhang_m
     axle = trimesh.creation.cylinder(radius=drum.axle_radius_m, height=axle_len, sections=64)
     axle.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
@@ -76,7 +87,7 @@ def drum_meshes(drum: DrumConfig) -> dict[str, trimesh.Trimesh]:
         box = trimesh.creation.box(extents=[0.03, mount_h, 0.06])
         box.apply_translation([sx * (0.5 * L + 0.5 * drum.axle_overhang_m), floor_y + 0.5 * mount_h, 0])
         mounts.append(box)
-    parts["mounts"] = trimesh.util.concatenate(mounts)
+    parts["mounts"] = cast("trimesh.Trimesh", trimesh.util.concatenate(mounts))
     if drum.bench:
         bench = trimesh.creation.box(extents=[L + 4 * drum.axle_overhang_m, 0.02, 4 * R])
         bench.apply_translation([0.0, floor_y - 0.01, 0.0])

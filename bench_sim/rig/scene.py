@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
+from bench_sim.rig import spectra
+from bench_sim.rig.drum_mesh import drum_meshes
 from bench_sim.rig.geometry import RigGeometry
 
 __all__ = [
@@ -93,8 +95,6 @@ def light_names(cfg: BenchConfig) -> tuple[str, ...]:
 
 def _level(cfg: BenchConfig, light: Any, value: float, spectral: bool) -> Any:
     """A light's emission spectrum: uniform (mono) or its spectrum over the band (spectral)."""
-    from bench_sim.rig import spectra
-
     if spectral:
         return spectra.light_spectrum(cfg, light, value)
     return {"type": "uniform", "value": value}
@@ -186,8 +186,6 @@ def _mesh_files(cfg: BenchConfig) -> dict[str, Path]:
 
 
 def _mesh_files_locked(cfg: BenchConfig) -> dict[str, Path]:
-    from bench_sim.rig.drum_mesh import drum_meshes
-
     global _MESH_FOLDER
     if _MESH_FOLDER is None:
         _MESH_FOLDER = tempfile.TemporaryDirectory(prefix="bench_sim_mesh_")
@@ -254,10 +252,31 @@ def scene_dict(
         Names (from :func:`light_names`) of the lights to put in the scene; ``None``: all of
         them. A scene with a subset shows what the bench looks like under those lights alone.
     """
-    from bench_sim.rig import spectra
-    lens, R, L = cfg.lens, cfg.drum.radius_m, cfg.drum.length_m
-    D = geom.camera_distance_m
-    film = {
+    R, L = cfg.drum.radius_m, cfg.drum.length_m
+    film = _film(cfg, width, height, spectral=spectral, aov_position=aov_position)
+    direct = _direct_integrator(cfg)
+    integrator = {"type": "aov", "aovs": "pos:position", "inner": direct} if aov_position else direct
+    sensor = _camera(mi, cfg, geom, film, spp)
+    scene: dict[str, Any] = {"type": "scene", "integrator": integrator, "sensor": sensor}
+    drum_bsdf = _drum_bsdf(cfg, reflectance)
+    if cfg.drum.geometry == "analytic":
+        scene["drum"] = {
+            "type": "cylinder",
+            "p0": [-0.5 * L, 0.0, 0.0],
+            "p1": [0.5 * L, 0.0, 0.0],
+            "radius": R,
+            "bsdf": drum_bsdf,
+        }
+    else:
+        scene.update(_mesh_shapes(mi, cfg, drum_bsdf))
+    _add_lights(mi, cfg, scene, direct, lights, spectral=spectral)
+    return scene
+
+
+def _film(cfg: BenchConfig, width: int, height: int, *, spectral: bool, aov_position: bool) -> dict[str, Any]:
+    """The film of :func:`scene_dict`: box-filtered ``hdrfilm`` (luminance for mono), ``specfilm``
+    with the sensor's response for a spectral render without the position AOV."""
+    film: dict[str, Any] = {
         "type": "hdrfilm",
         "width": int(width),
         "height": int(height),
@@ -269,6 +288,14 @@ def scene_dict(
         film.update(type="specfilm", component_format="float32", Y=spectra.response_dict(cfg))
     elif not spectral:
         film["pixel_format"] = "luminance"
+    return film
+
+
+def _camera(mi: Any, cfg: BenchConfig, geom: RigGeometry, film: dict[str, Any], spp: int) -> dict[str, Any]:
+    """The camera of :func:`scene_dict`: the lens model at ``+z`` looking at the drum's top, its
+    shutter open for one integration time ``t_int`` [s]."""
+    lens, R = cfg.lens, cfg.drum.radius_m
+    D = geom.camera_distance_m
     sensor: dict[str, Any] = {
         "type": lens.model,
         "fov": geom.fov_x_deg,
@@ -284,27 +311,33 @@ def scene_dict(
     if lens.model == "thinlens":
         sensor["aperture_radius"] = lens.focal_length_m / (2.0 * lens.f_number)
         sensor["focus_distance"] = lens.focus_m
+    return sensor
+
+
+def _direct_integrator(cfg: BenchConfig) -> dict[str, Any]:
+    """``direct`` (``render.max_depth = 2``) with its sample counts, else ``path``."""
     r = cfg.render
-    direct = {
+    direct: dict[str, Any] = {
         "type": "direct" if r.max_depth == 2 else "path",
     }
     if r.max_depth == 2:
         direct.update(emitter_samples=r.emitter_samples, bsdf_samples=r.bsdf_samples)
     else:
         direct.update(max_depth=r.max_depth)
-    integrator = {"type": "aov", "aovs": "pos:position", "inner": direct} if aov_position else direct
-    scene: dict[str, Any] = {"type": "scene", "integrator": integrator, "sensor": sensor}
-    drum_bsdf = _drum_bsdf(cfg, reflectance)
-    if cfg.drum.geometry == "analytic":
-        scene["drum"] = {
-            "type": "cylinder",
-            "p0": [-0.5 * L, 0.0, 0.0],
-            "p1": [0.5 * L, 0.0, 0.0],
-            "radius": R,
-            "bsdf": drum_bsdf,
-        }
-    else:
-        scene.update(_mesh_shapes(mi, cfg, drum_bsdf))
+    return direct
+
+
+def _add_lights(
+    mi: Any,
+    cfg: BenchConfig,
+    scene: dict[str, Any],
+    direct: dict[str, Any],
+    lights: Sequence[str] | None,
+    *,
+    spectral: bool,
+) -> None:
+    """Put the emitting lights ``lights`` (``None``: all) into ``scene``; with a fill, steer the
+    emitter samples (``direct`` is the integrator in the scene, changed in place)."""
     active = light_names(cfg)
     if lights is not None:
         unknown = [n for n in lights if n not in active]
@@ -319,7 +352,6 @@ def scene_dict(
         # send the emitter samples to the other lights (notes: cuts the fill's noise ~30x), or,
         # with the fill alone, use BSDF samples only
         if len(active) > len(fills):
-            scene[fills[0]]["sampling_weight"] = r.weak_sampling_weight
+            scene[fills[0]]["sampling_weight"] = cfg.render.weak_sampling_weight
         elif direct["type"] == "direct":
             direct["emitter_samples"] = 0  # (direct is also the aov integrator's inner one)
-    return scene

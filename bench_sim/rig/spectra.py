@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench_sim.config import BenchConfig, LightConfig
+from bench_sim.errors import BenchSimError
 
 __all__ = [
     "DEFAULT_QE_CURVE",
@@ -57,8 +58,6 @@ def qe_curve(cfg: BenchConfig) -> tuple[np.ndarray, np.ndarray]:
     ref_nm = cfg.sensor.wavelength_m * 1e9
     at_ref = float(np.interp(ref_nm, wl, rel))
     if at_ref <= 0:
-        from bench_sim.errors import BenchSimError
-
         raise BenchSimError(
             f"sensor.qe_curve: relative QE at sensor.wavelength_m = {cfg.sensor.wavelength_m} is 0"
         )

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bench_sim.config import TargetConfig
+from bench_sim.rig.target_sources import MAP_LAYOUTS, panel_map
 
 __all__ = ["Patch", "TargetPanel", "make_panel", "rasterize", "rasterize_at", "BAR_PERIODS_PX"]
 
@@ -250,8 +251,6 @@ def make_panel(
     """
     n_rep = max(int(circumference_px // cfg.panel_lines), 1)
     period = circumference_px / n_rep
-    from bench_sim.rig.target_sources import MAP_LAYOUTS, panel_map
-
     if cfg.layout in MAP_LAYOUTS:
         child = rng.spawn(1)[0] if rng is not None else None
         return TargetPanel(cfg, period, (), texture_map=panel_map(cfg, child))

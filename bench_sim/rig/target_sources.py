@@ -51,13 +51,13 @@ References
 from __future__ import annotations
 
 import functools
-import os
 from pathlib import Path
 
 import numpy as np
 
 from bench_sim.config import TargetConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.io.images import image_file_problem, read_image_data
 
 __all__ = [
     "MAP_LAYOUTS",
@@ -80,7 +80,6 @@ MAP_LAYOUTS = ("image", "dead_leaves", "slanted_edges", "random_bars")
 #: Rec. 709 luminance weights of linear R, G, B
 REC709_LUMA = (0.2126, 0.7152, 0.0722)
 
-_SUFFIXES = (".png", ".tif", ".tiff", ".exr", ".npy")
 _MAX_DISCS = 2_000_000
 
 
@@ -94,37 +93,9 @@ def srgb_to_linear(v: np.ndarray) -> np.ndarray:
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
-def _read_raw(path: Path) -> tuple[np.ndarray, list[str] | None]:
-    """Pixel array (H, W) or (H, W, C) and channel names (EXR only)."""
-    suffix = path.suffix.lower()
-    if suffix == ".npy":
-        return np.load(path, allow_pickle=False), None
-    if suffix == ".exr":
-        from bench_sim.io import read_exr
-
-        channels, _ = read_exr(path)
-        names = sorted(channels)
-        return np.stack([channels[n] for n in names], axis=-1), names
-    if suffix in (".tif", ".tiff"):
-        import tifffile
-
-        return tifffile.imread(path), None
-    import imageio.v3 as iio
-
-    return iio.imread(path, plugin="pillow"), None
-
-
-@functools.lru_cache(maxsize=8)
-def _read_target_image_cached(
-    path: str, mtime_ns: int, encoding: str | None, channel: str
-) -> tuple[np.ndarray, bool]:
-    p = Path(path)
-    try:
-        arr, names = _read_raw(p)
-    except Exception as exc:  # every reader raises its own kinds
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise TargetImageError(f"target.image = {path!r}: cannot read the file ({msg})") from None
-    arr = np.asarray(arr)
+def _unit_values(arr: np.ndarray, path: str) -> tuple[np.ndarray, bool]:
+    """The pixels as float64 0..1 (integers scaled by their type's maximum, floats checked to lie
+    in 0..1), shape (H, W) or (H, W, C), and whether the file held integers."""
     is_int = np.issubdtype(arr.dtype, np.integer) or arr.dtype == bool
     if not (is_int or np.issubdtype(arr.dtype, np.floating)):
         raise TargetImageError(f"target.image = {path!r}: unsupported pixel type {arr.dtype}")
@@ -140,71 +111,79 @@ def _read_target_image_cached(
         top = 1 if arr.dtype == bool else np.iinfo(arr.dtype).max
         if arr.dtype != bool and arr.size and arr.min() < 0:
             raise TargetImageError(f"target.image = {path!r}: negative values in a {arr.dtype} image")
-        vals = arr.astype(np.float64) / float(top)
-    else:
-        vals = arr.astype(np.float64)
-        if not np.isfinite(vals).all():
-            raise TargetImageError(f"target.image = {path!r}: contains NaN or inf values")
-        if vals.min() < 0 or vals.max() > 1:
-            raise TargetImageError(
-                f"target.image = {path!r}: float values {vals.min():.4g}..{vals.max():.4g} lie outside "
-                "0..1 (a float image is taken as reflectance)"
-            )
-    enc = encoding or ("srgb" if is_int else "linear")
-    if vals.ndim == 3:
-        n_ch = vals.shape[-1]
-        if names is None:
-            names = ["R", "G", "B", "A"][:n_ch] if n_ch in (3, 4) else [str(i) for i in range(n_ch)]
-        if channel == "luminance":
-            idx = [names.index(c) for c in ("R", "G", "B") if c in names]
-            if len(idx) != 3:
-                raise TargetImageError(
-                    f"target.image = {path!r}: target.image_channel = 'luminance' needs R, G, B channels "
-                    f"(the file has {names}); name one channel"
-                )
-            rgb = vals[..., idx]
-            if enc == "srgb":
-                rgb = srgb_to_linear(rgb)
-            out = rgb @ np.asarray(REC709_LUMA)
-        else:
-            if channel not in names:
-                raise TargetImageError(
-                    f"target.image = {path!r}: target.image_channel = {channel!r} is not a channel of "
-                    f"the file (it has {names})"
-                )
-            out = vals[..., names.index(channel)]
-            if enc == "srgb":
-                out = srgb_to_linear(out)
-    else:
+        return arr.astype(np.float64) / float(top), True
+    vals = arr.astype(np.float64)
+    if not np.isfinite(vals).all():
+        raise TargetImageError(f"target.image = {path!r}: contains NaN or inf values")
+    if vals.min() < 0 or vals.max() > 1:
+        raise TargetImageError(
+            f"target.image = {path!r}: float values {vals.min():.4g}..{vals.max():.4g} lie outside "
+            "0..1 (a float image is taken as reflectance)"
+        )
+    return vals, False
+
+
+def _one_channel(vals: np.ndarray, names: list[str] | None, channel: str, enc: str, path: str) -> np.ndarray:
+    """The channel ``target.image_channel`` of 0..1 values (``luminance``: Rec. 709 of linear
+    R, G, B), decoded from sRGB when ``enc`` is ``"srgb"``."""
+    if vals.ndim == 2:
         if channel not in ("luminance", "Y", "R", "G", "B"):
             raise TargetImageError(
                 f"target.image = {path!r}: target.image_channel = {channel!r}, but the image has one channel"
             )
-        out = srgb_to_linear(vals) if enc == "srgb" else vals
-    out = np.ascontiguousarray(out, dtype=np.float64)
+        return srgb_to_linear(vals) if enc == "srgb" else vals
+    n_ch = vals.shape[-1]
+    if names is None:
+        names = ["R", "G", "B", "A"][:n_ch] if n_ch in (3, 4) else [str(i) for i in range(n_ch)]
+    if channel == "luminance":
+        idx = [names.index(c) for c in ("R", "G", "B") if c in names]
+        if len(idx) != 3:
+            raise TargetImageError(
+                f"target.image = {path!r}: target.image_channel = 'luminance' needs R, G, B channels "
+                f"(the file has {names}); name one channel"
+            )
+        rgb = vals[..., idx]
+        if enc == "srgb":
+            rgb = srgb_to_linear(rgb)
+        return rgb @ np.asarray(REC709_LUMA)
+    if channel not in names:
+        raise TargetImageError(
+            f"target.image = {path!r}: target.image_channel = {channel!r} is not a channel of "
+            f"the file (it has {names})"
+        )
+    out = vals[..., names.index(channel)]
+    return srgb_to_linear(out) if enc == "srgb" else out
+
+
+@functools.lru_cache(maxsize=8)
+def _read_target_image_cached(
+    path: str, mtime_ns: int, encoding: str | None, channel: str
+) -> tuple[np.ndarray, bool]:
+    try:
+        arr, names = read_image_data(path)
+    except Exception as exc:  # every reader raises its own kinds
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise TargetImageError(f"target.image = {path!r}: cannot read the file ({msg})") from None
+    vals, is_int = _unit_values(np.asarray(arr), path)
+    enc = encoding or ("srgb" if is_int else "linear")
+    out = np.ascontiguousarray(_one_channel(vals, names, channel, enc, path), dtype=np.float64)
     out.setflags(write=False)
-    return out, bool(is_int)
+    return out, is_int
 
 
 def read_target_image(cfg: TargetConfig) -> tuple[np.ndarray, bool]:
     """The target image as linear values 0..1 (one channel) and whether the file held integers.
 
     Raises :class:`TargetImageError` (one line naming the file and the problem) for a missing,
-    unreadable or unsupported file, NaN/inf, or float values outside 0..1.
+    unreadable or unsupported file (:func:`bench_sim.io.image_file_problem`), NaN/inf, or float
+    values outside 0..1.
     """
     if cfg.image is None:
         raise TargetImageError("target.layout = 'image' needs target.image (a file name)")
-    p = Path(cfg.image)
-    if p.suffix.lower() not in _SUFFIXES:
-        raise TargetImageError(
-            f"target.image = {cfg.image!r}: unsupported file type '{p.suffix}' (allowed: "
-            f"{', '.join(_SUFFIXES)})"
-        )
-    if not p.is_file():
-        raise TargetImageError(f"target.image = {cfg.image!r}: no such file")
-    if not os.access(p, os.R_OK):
-        raise TargetImageError(f"target.image = {cfg.image!r}: not readable")
-    p = p.resolve()
+    problem = image_file_problem(cfg.image)
+    if problem is not None:
+        raise TargetImageError(f"target.image = {cfg.image!r}: {problem}")
+    p = Path(cfg.image).resolve()
     return _read_target_image_cached(str(p), p.stat().st_mtime_ns, cfg.image_encoding, cfg.image_channel)
 
 

@@ -32,6 +32,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+from bench_sim.config.variants import check_variant_name, mitsuba_variants
 from bench_sim.errors import BenchSimError
 
 __all__ = [
@@ -50,7 +51,6 @@ __all__ = [
 ]
 
 ENV_VARIANT = "BENCH_SIM_VARIANT"
-KINDS = ("cuda", "llvm", "scalar")
 
 ENV_LLVM = "DRJIT_LIBLLVM_PATH"
 #: Child-process probe: import drjit with the candidate library and run a kernel with
@@ -276,33 +276,6 @@ def variant_for(kind: str, mode: str = "mono") -> str:
     return f"{kind}_ad_{mode}"
 
 
-def mitsuba_variants() -> tuple[str, ...]:
-    """The variants the installed Mitsuba was built with, read from its ``config.py`` without
-    importing Mitsuba (``()`` if Mitsuba is not installed)."""
-    import ast
-    from importlib.metadata import files
-
-    try:  # the installed files (an imported Mitsuba replaces its own module spec)
-        paths = [Path(str(f.locate())) for f in files("mitsuba") or () if f.name == "config.py"]
-    except PackageNotFoundError:
-        return ()
-    for path in paths:
-        if path.parent.name != "mitsuba":
-            continue
-        try:
-            tree = ast.parse(path.read_text())
-        except (OSError, SyntaxError, ValueError):
-            continue
-        for node in tree.body:
-            if (
-                isinstance(node, ast.Assign)
-                and any(isinstance(t, ast.Name) and t.id == "MI_VARIANTS" for t in node.targets)
-            ):
-                value = ast.literal_eval(node.value)
-                return tuple(str(v) for v in value)
-    return ()
-
-
 def resolve_preference(config_variant: str = "auto") -> tuple[str, str]:
     """The backend preference and where it comes from: ``render.variant`` unless it is
     ``"auto"``, then the environment variable ``BENCH_SIM_VARIANT``, else ``"auto"``.
@@ -315,37 +288,6 @@ def resolve_preference(config_variant: str = "auto") -> tuple[str, str]:
     if env is not None and env.strip() not in ("", "auto"):
         return env.strip(), ENV_VARIANT
     return "auto", "render.variant"
-
-
-def _allowed_variants(mode: str) -> list[str]:
-    want = "spectral" if mode == "spectral" else ("mono", "rgb")
-    return [
-        v for v in mitsuba_variants() if "polarized" not in v and v.rsplit("_", 1)[-1] in want
-    ]
-
-
-def check_variant_name(prefer: str, mode: str = "mono", source: str = "render.variant") -> None:
-    """Refuse a preference that names no backend kind and no usable Mitsuba variant.
-
-    Allowed: ``"auto"``, ``"cuda"``, ``"llvm"``, ``"scalar"``, or a variant the installed Mitsuba
-    has for the colour mode (``*_mono`` / ``*_rgb`` for mono, ``*_spectral`` for spectral
-    rendering; polarised variants are not used). Raises :class:`BenchSimError` naming ``source``.
-    """
-    if prefer in ("auto", *KINDS):
-        return
-    allowed = _allowed_variants(mode)
-    if prefer in allowed:
-        return
-    known = mitsuba_variants()
-    why = (
-        f"not a variant for {mode} rendering" if prefer in known
-        else "not a Mitsuba variant of this installation" if known
-        else "Mitsuba is not installed"
-    )
-    listed = ", ".join(allowed) if allowed else "-"
-    raise BenchSimError(
-        f"{source} = {prefer!r}: {why}; allowed 'auto', 'cuda', 'llvm', 'scalar' or one of: {listed}"
-    )
 
 
 def choose_backend(
@@ -388,27 +330,22 @@ def choose_backend(
     wanted = prefer.split("_", 1)[0] if explicit_variant else prefer
     forced = f"{source} = {prefer!r}"
 
-    def pick(kind: str) -> str:
-        return explicit_variant or variant_for(kind, mode)
-
     if wanted in ("auto", "cuda"):
         res = cuda_probe()
         probes["cuda"] = res.detail
         if res.ok:
-            return BackendChoice(pick("cuda"), "cuda", None, "CUDA backend works", probes)
+            return BackendChoice(explicit_variant or variant_for("cuda", mode), "cuda", None,
+                                 "CUDA backend works", probes)
         if wanted == "cuda":
             raise BenchSimError(
                 f"{forced}: the CUDA backend cannot run here ({res.detail}); use 'auto' "
                 "(CUDA, else LLVM, else scalar) or 'llvm'"
             )
     if wanted in ("auto", "llvm"):
-        for path in candidates():
-            res = llvm_probe(path)
-            probes[path] = ("ok: " if res.ok else "rejected: ") + res.detail
-            if res.ok:
-                return BackendChoice(
-                    pick("llvm"), "llvm", path, f"libLLVM at {path} passed the probe", probes
-                )
+        variant = explicit_variant or variant_for("llvm", mode)
+        llvm = _first_working_llvm(candidates(), llvm_probe, probes, variant)
+        if llvm is not None:
+            return llvm
         if wanted == "llvm":
             tried = "; ".join(f"{p}: {d}" for p, d in probes.items() if p != "cuda") or "none found"
             raise BenchSimError(
@@ -432,6 +369,19 @@ def choose_backend(
         reason,
         probes,
     )
+
+
+def _first_working_llvm(
+    paths: Sequence[str], probe: Callable[[str], ProbeResult], probes: dict[str, str], variant: str
+) -> BackendChoice | None:
+    """The LLVM choice with the first library of ``paths`` that passes ``probe``, or ``None``;
+    each verdict is recorded in ``probes`` (path -> ``ok: ...`` / ``rejected: ...``)."""
+    for path in paths:
+        res = probe(path)
+        probes[path] = ("ok: " if res.ok else "rejected: ") + res.detail
+        if res.ok:
+            return BackendChoice(variant, "llvm", path, f"libLLVM at {path} passed the probe", probes)
+    return None
 
 
 _ACTIVE: BackendChoice | None = None

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from bench_sim.config import BenchConfig, config_sha256, config_to_toml_dict
+from bench_sim.runtime.backend import versions
 from bench_sim.version import __version__
 
 __all__ = ["provenance", "render_provenance", "PROCESS_KEYS"]
@@ -18,8 +19,6 @@ PROCESS_KEYS = ("mitsuba_renders", "mitsuba_renders_process")
 def provenance(cfg: BenchConfig, seed: int, **extra: Any) -> dict[str, Any]:
     """Metadata block for an output: ``version``, ``seed``, ``config_sha256``, ``config`` and
     any ``extra`` keys."""
-    from bench_sim.runtime.backend import versions
-
     meta: dict[str, Any] = {
         "version": __version__,
         "seed": int(seed),

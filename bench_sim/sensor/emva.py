@@ -39,6 +39,7 @@ eq. 1-8).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -270,6 +271,106 @@ def shot_and_read_electrons(
     return _cornish_fisher(z, lam + deterministic_e, var, lam, lam)
 
 
+@dataclass(frozen=True)
+class _ExposurePlan:
+    """What :func:`expose` computes once per call: the switches and per-pixel constants, in the
+    working precision ``work`` (float32 with quantisation: errors ~1e-4 DN, far below the
+    rounding, and twice as fast; float64 without)."""
+
+    work: np.dtype
+    shot_noise: bool
+    dark_noise: bool
+    quantization: bool
+    qe_gain: np.ndarray  # QE times PRNU gain [e-/photon]
+    dark_e: np.ndarray  # dark electrons per frame [e-]
+    offset_dn: np.ndarray  # black offset plus column offsets [DN]
+    gain: Any  # conversion gain K [DN/e-], a scalar of dtype work
+    full_well: Any  # [e-], a scalar of dtype work
+    top: float  # largest raw value [DN]
+    sampler: str
+    read_e: float  # read noise [e-] (0: off)
+    noisy: bool  # shot or dark noise on
+    together: bool  # shot and read noise drawn together (shot_and_read_electrons)
+    near_fw_e: float  # mean electrons from which the full well is within FULL_WELL_SIGMAS
+
+    @classmethod
+    def of(cls, sensor: SensorConfig, fixed: FixedPattern, t_int_s: float) -> _ExposurePlan:
+        work = np.dtype(np.float32 if sensor.quantization else np.float64)
+        sampler = getattr(sensor, "shot_noise_sampler", "hybrid")
+        read_e = float(sensor.read_noise_e) if sensor.read_noise else 0.0
+        noisy = sensor.shot_noise or sensor.dark_noise
+        k = FULL_WELL_SIGMAS  # m + k sqrt(m) = FW
+        return cls(
+            work=work,
+            shot_noise=sensor.shot_noise,
+            dark_noise=sensor.dark_noise,
+            quantization=sensor.quantization,
+            qe_gain=(sensor.quantum_efficiency * fixed.prnu_gain).astype(work),
+            dark_e=(fixed.dark_current_e_s * float(t_int_s)).astype(work),
+            offset_dn=(sensor.black_offset_dn + fixed.column_offset_dn).astype(work),
+            gain=work.type(sensor.conversion_gain_dn_per_e),
+            full_well=work.type(sensor.full_well_e),
+            top=float(pixel_saturation_dn(sensor)),
+            sampler=sampler,
+            read_e=read_e,
+            noisy=noisy,
+            together=sampler == "hybrid" and noisy and read_e >= COMBINED_READ_NOISE_MIN_E,
+            near_fw_e=((-k + np.sqrt(k * k + 4.0 * sensor.full_well_e)) / 2.0) ** 2,
+        )
+
+
+def _apart(
+    plan: _ExposurePlan,
+    poisson_e: np.ndarray,
+    fixed_e: np.ndarray,
+    s_out: np.ndarray | None,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Shot noise, full-well clip, then read noise [e-]."""
+    electrons = shot_electrons(poisson_e, rng, plan.sampler) if plan.noisy else poisson_e.astype(plan.work)
+    electrons += fixed_e
+    if s_out is not None:
+        np.greater_equal(electrons, plan.full_well, out=s_out)
+    np.minimum(electrons, plan.full_well, out=electrons)
+    if plan.read_e > 0:
+        noise = rng.standard_normal(electrons.shape, dtype=np.float32)
+        noise *= np.float32(plan.read_e)
+        electrons += noise
+    return electrons
+
+
+def _block_electrons(
+    plan: _ExposurePlan, ph: np.ndarray, rng: np.random.Generator, s_blk: np.ndarray | None
+) -> np.ndarray:
+    """Electrons [e-] of a block of frames of mean photons ``ph``, with their temporal noise;
+    ``s_blk`` (if given) is set where the full well was reached."""
+    light_e = np.multiply(ph, plan.qe_gain, dtype=plan.work)
+    # the Poisson part and the part without noise
+    if plan.shot_noise and plan.dark_noise:
+        light_e += plan.dark_e
+        poisson_e, fixed_e = light_e, np.zeros((), plan.work)
+    elif plan.shot_noise:
+        poisson_e, fixed_e = light_e, np.broadcast_to(plan.dark_e, ph.shape)
+    elif plan.dark_noise:
+        poisson_e, fixed_e = np.broadcast_to(plan.dark_e, ph.shape), light_e
+    else:
+        light_e += plan.dark_e
+        poisson_e, fixed_e = light_e, np.zeros((), plan.work)
+    if not plan.together:
+        return _apart(plan, poisson_e, fixed_e, s_blk, rng)
+    electrons = shot_and_read_electrons(poisson_e, fixed_e, plan.read_e, rng)
+    if s_blk is not None:
+        s_blk[...] = False
+    near = (poisson_e + fixed_e) >= plan.near_fw_e
+    if near.any():
+        s_near = np.empty(int(near.sum()), dtype=bool)
+        fixed_near = np.broadcast_to(fixed_e, near.shape)[near]
+        electrons[near] = _apart(plan, poisson_e[near], fixed_near, s_near, rng)
+        if s_blk is not None:
+            s_blk[near] = s_near
+    return electrons
+
+
 def expose(
     photons: np.ndarray,
     sensor: SensorConfig,
@@ -333,71 +434,17 @@ def expose(
     frames = p.reshape(-1, rows, cols)
     out = np.empty(frames.shape, dtype=np.uint16 if sensor.quantization else np.float64)
     sat = None if saturated is None else saturated.reshape(frames.shape)
-    # with quantisation the words are integers: float32 arithmetic (errors ~1e-4 DN, far below
-    # the rounding) is exact enough and twice as fast; without it, float64
-    work = np.dtype(np.float32 if sensor.quantization else np.float64)
-    qe_gain = (sensor.quantum_efficiency * fixed.prnu_gain).astype(work)
-    dark_e = (fixed.dark_current_e_s * float(t_int_s)).astype(work)
-    offset_dn = (sensor.black_offset_dn + fixed.column_offset_dn).astype(work)
-    gain = work.type(sensor.conversion_gain_dn_per_e)
-    full_well = work.type(sensor.full_well_e)
-    top = float(pixel_saturation_dn(sensor))
-    sampler = getattr(sensor, "shot_noise_sampler", "hybrid")
-    read_e = float(sensor.read_noise_e) if sensor.read_noise else 0.0
-    noisy = sensor.shot_noise or sensor.dark_noise
-    together = sampler == "hybrid" and noisy and read_e >= COMBINED_READ_NOISE_MIN_E
-    # mean electrons from which the full well is within FULL_WELL_SIGMAS: m + k sqrt(m) = FW
-    k = FULL_WELL_SIGMAS
-    near_fw_e = ((-k + np.sqrt(k * k + 4.0 * sensor.full_well_e)) / 2.0) ** 2
-
-    def apart(poisson_e: np.ndarray, fixed_e: np.ndarray, s_out: np.ndarray | None) -> np.ndarray:
-        """Shot noise, full-well clip, then read noise."""
-        electrons = shot_electrons(poisson_e, rng, sampler) if noisy else poisson_e.astype(work)
-        electrons += fixed_e
-        if s_out is not None:
-            np.greater_equal(electrons, full_well, out=s_out)
-        np.minimum(electrons, full_well, out=electrons)
-        if read_e > 0:
-            noise = rng.standard_normal(electrons.shape, dtype=np.float32)
-            noise *= np.float32(read_e)
-            electrons += noise
-        return electrons
-
+    plan = _ExposurePlan.of(sensor, fixed, t_int_s)
     step = max(1, _BLOCK_ELEMENTS // (rows * cols))
     for f0 in range(0, frames.shape[0], step):
-        ph = frames[f0 : f0 + step]
-        light_e = np.multiply(ph, qe_gain, dtype=work)
-        # the Poisson part and the part without noise
-        if sensor.shot_noise and sensor.dark_noise:
-            light_e += dark_e
-            poisson_e, fixed_e = light_e, np.zeros((), work)
-        elif sensor.shot_noise:
-            poisson_e, fixed_e = light_e, np.broadcast_to(dark_e, ph.shape)
-        elif sensor.dark_noise:
-            poisson_e, fixed_e = np.broadcast_to(dark_e, ph.shape), light_e
-        else:
-            light_e += dark_e
-            poisson_e, fixed_e = light_e, np.zeros((), work)
         s_blk = None if sat is None else sat[f0 : f0 + step]
-        if together:
-            electrons = shot_and_read_electrons(poisson_e, fixed_e, read_e, rng)
-            if s_blk is not None:
-                s_blk[...] = False
-            near = (poisson_e + fixed_e) >= near_fw_e
-            if near.any():
-                s_near = np.empty(int(near.sum()), dtype=bool)
-                electrons[near] = apart(poisson_e[near], np.broadcast_to(fixed_e, near.shape)[near], s_near)
-                if s_blk is not None:
-                    s_blk[near] = s_near
-        else:
-            electrons = apart(poisson_e, fixed_e, s_blk)
-        dn = electrons
-        dn *= gain
-        dn += offset_dn
+        dn = _block_electrons(plan, frames[f0 : f0 + step], rng, s_blk)
+        dn *= plan.gain
+        dn += plan.offset_dn
         if s_blk is not None:
-            s_blk |= dn >= top - (0.5 if sensor.quantization else 0.0)
-        if sensor.quantization:
+            s_blk |= dn >= plan.top - (0.5 if plan.quantization else 0.0)
+        if plan.quantization:
             np.rint(dn, out=dn)
-        np.clip(dn, 0, top, out=dn)
+        np.clip(dn, 0, plan.top, out=dn)
         out[f0 : f0 + step] = dn
     return out.reshape(p.shape)

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bench_sim.config import BETA_BITS_MAX, BETA_BITS_MIN
+from bench_sim.config import BETA_BITS_MAX, BETA_BITS_MIN, word_full_scale_dn, word_top_dn
 from bench_sim.errors import BenchSimError
 
 if TYPE_CHECKING:
@@ -81,12 +81,13 @@ def check_beta_bits(beta_bits: int, name: str = "beta_bits") -> int:
 def full_scale_dn(beta_bits: int, name: str = "beta_bits") -> int:
     """``Phi_FS = 2**beta`` [DN] (paper eq. 4); the largest stored value is ``Phi_FS - 1``.
     ``beta_bits`` is validated by :func:`check_beta_bits` (errors name ``name``)."""
-    return 1 << check_beta_bits(beta_bits, name)
+    return word_full_scale_dn(check_beta_bits(beta_bits, name))
 
 
 def word_clip_dn(beta_bits: int, name: str = "beta_bits") -> int:
-    """Largest value a ``beta``-bit stage word stores: ``2**beta - 1`` [DN]."""
-    return full_scale_dn(beta_bits, name) - 1
+    """Largest value a ``beta``-bit stage word stores: ``2**beta - 1`` [DN]
+    (:func:`bench_sim.config.schema.word_top_dn`, ``beta_bits`` checked)."""
+    return word_top_dn(check_beta_bits(beta_bits, name))
 
 
 def word_dtype(beta_bits: int) -> np.dtype:
@@ -96,20 +97,22 @@ def word_dtype(beta_bits: int) -> np.dtype:
 
 
 def pixel_saturation_dn(sensor: SensorConfig) -> int:
-    """Largest raw pixel value: ``2**adc_bits - 1`` [DN]."""
-    return (1 << sensor.adc_bits) - 1
+    """Largest raw pixel value: ``2**adc_bits - 1`` [DN]
+    (:attr:`bench_sim.config.SensorConfig.pixel_saturation_dn`)."""
+    return sensor.pixel_saturation_dn
 
 
 def pixel_saturation_electrons(sensor: SensorConfig) -> float:
     """Electrons [e-] at which a pixel stops responding: the full well, or the ADC top above
-    the black offset, ``(2**adc_bits - 1 - b) / K``, whichever comes first."""
-    adc = (pixel_saturation_dn(sensor) - sensor.black_offset_dn) / sensor.conversion_gain_dn_per_e
-    return float(min(sensor.full_well_e, adc))
+    the black offset, ``(2**adc_bits - 1 - b) / K``, whichever comes first
+    (:attr:`bench_sim.config.SensorConfig.pixel_saturation_electrons`)."""
+    return sensor.pixel_saturation_electrons
 
 
 def dark_electrons(sensor: SensorConfig, t_int_s: float) -> float:
-    """Mean dark electrons of one read, ``mu_d = I_d t_int`` [e-]."""
-    return float(sensor.dark_current_e_s * t_int_s)
+    """Mean dark electrons of one read, ``mu_d = I_d t_int`` [e-]
+    (:meth:`bench_sim.config.SensorConfig.dark_electrons`)."""
+    return sensor.dark_electrons(t_int_s)
 
 
 def dark_noise_e(sensor: SensorConfig, t_int_s: float) -> float:

@@ -29,15 +29,18 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from bench_sim.config import BenchConfig, SensorConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.texture import RunTexture
 from bench_sim.rig.geometry import RigGeometry, surface_angles
 from bench_sim.sensor.emva import FixedPattern
+
+if TYPE_CHECKING:  # scipy is imported where the matrices are built (it costs start-up time)
+    import scipy.sparse as sp
 
 __all__ = [
     "RowFootprints",
@@ -127,6 +130,8 @@ def row_footprints(cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, rows: 
     edge_texels = scales * (0.5 * N * pitch) / grid.h_x_m
     keys = np.round((edge_texels - edge_texels[0]) / _X_GROUP_TOL_TEXELS).astype(np.int64)
     x_group = np.zeros(rows, dtype=np.int64)
+    import scipy.sparse as sp
+
     mats: list[sp.csr_matrix] = []
     seen: dict[int, int] = {}
     xs = (np.arange(N)[:, None] + g[None, :] - N / 2.0) * pitch  # (N, S) sensor offsets

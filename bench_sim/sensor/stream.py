@@ -1,10 +1,11 @@
 """Sensor + DTDI in one streaming pass: photons per pixel per frame -> stage images.
 
-This is the hand-off used by the experiments: frames of mean photons (from the renderer, or a
-uniform field for the photon-transfer measurement) go through the EMVA 1288 pixel model
-(:func:`bench_sim.sensor.emva.expose`) in chunks of frames and straight into the streaming
-:class:`bench_sim.sensor.dtdi.DTDIAccumulator`; only the output stage images grow with the
-number of lines.
+:func:`iter_stream` is the one sensor + DTDI loop of the package: frames of mean photons (from
+the renderer in :func:`bench_sim.pipeline.run_pass`, or a uniform field for the photon-transfer
+measurement, :func:`bench_sim.measure.uniform_field.expose_uniform`) go through the EMVA 1288
+pixel model (:func:`bench_sim.sensor.emva.expose`) in chunks of frames and straight into the
+streaming :class:`bench_sim.sensor.dtdi.DTDIAccumulator`; only the output stage images grow with
+the number of lines.
 
 Chunks of :data:`DEFAULT_CHUNK_FRAMES` frames are exposed on the thread pool
 (:mod:`bench_sim.runtime.parallel`, ``BENCH_SIM_THREADS``), chunk ``c`` with its own generator
@@ -28,7 +29,15 @@ from bench_sim.runtime.parallel import chunk_generator, ordered_imap, seed_seque
 from bench_sim.sensor.dtdi import DTDIAccumulator, collect_stage_lines, validate_stages
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, expose
 
-__all__ = ["sensor_dtdi_pass", "iter_sensor_dtdi", "iter_exposed", "Exposed", "DEFAULT_CHUNK_FRAMES"]
+__all__ = [
+    "sensor_dtdi_pass",
+    "iter_sensor_dtdi",
+    "iter_stream",
+    "StreamedChunk",
+    "iter_exposed",
+    "Exposed",
+    "DEFAULT_CHUNK_FRAMES",
+]
 
 #: Frames exposed per vectorised call, each chunk with its own random stream. The temporal noise
 #: drawn depends on this chunking (the frames are re-chunked to it whatever the input's own
@@ -103,37 +112,41 @@ def iter_exposed(
     return ordered_imap(one, enumerate(chunks))
 
 
-def iter_sensor_dtdi(
+@dataclass(frozen=True)
+class StreamedChunk:
+    """One chunk of a streaming pass: the exposed chunk (:class:`Exposed`), the stage lines it
+    completed (stage ``m`` -> (n, C) block continuing the previous one; n may be 0) and the
+    seconds its exposure and accumulation took."""
+
+    exposed: Exposed
+    lines: dict[int, np.ndarray]
+    seconds: float
+
+
+def iter_stream(
     photons: np.ndarray | Iterable[np.ndarray],
     sensor: SensorConfig,
     dtdi: DTDIConfig,
     t_int_s: float,
     stages: Sequence[int],
-    rng: np.random.Generator | np.random.SeedSequence | int,
+    fixed: FixedPattern,
+    noise: np.random.SeedSequence,
     *,
-    fixed: FixedPattern | None = None,
     pedestal_dn: float | Mapping[int, float] | None = None,
     chunk_frames: int = DEFAULT_CHUNK_FRAMES,
-) -> Iterator[dict[int, np.ndarray]]:
-    """Stream a pass: expose each chunk of frames and yield the stage lines it completed.
+    saturated: bool = False,
+) -> Iterator[StreamedChunk]:
+    """The one sensor + DTDI loop: re-chunk the frames to ``chunk_frames``, expose every chunk
+    (:func:`iter_exposed`, chunk ``c`` drawing from ``chunk_generator(noise, c)``) and push its
+    raw values through one :class:`~bench_sim.sensor.dtdi.DTDIAccumulator`.
 
-    Memory stays ``O(chunk_frames * R * C)`` for the frames plus the accumulator's ring,
-    whatever the number of lines, as long as the caller does not keep the yielded lines.
-    Arguments as in :func:`sensor_dtdi_pass`.
-
-    Yields
-    ------
-    dict
-        Per chunk: stage ``m`` -> (n, C) ``uint32`` block of its next complete lines (in line
-        order, continuing from the previous block; n may be 0).
+    ``fixed`` is the whole sensor's pattern or exactly the frames' ``R x C``; ``saturated``:
+    also return each chunk's saturated reads. The other arguments as in
+    :func:`sensor_dtdi_pass`. Nothing is drawn here but the chunks' temporal noise.
     """
     if chunk_frames < 1:
         raise BenchSimError(f"chunk_frames = {chunk_frames!r}: must be >= 1")
     st = validate_stages(stages)
-    gen = np.random.default_rng(rng)
-    if fixed is None:
-        fixed = draw_fixed_pattern(sensor, gen)
-    noise = seed_sequence(gen)
     chunks = _rechunk(photons, chunk_frames)
     first = next(chunks, None)
     if first is None:
@@ -150,8 +163,48 @@ def iter_sensor_dtdi(
         cols, st, dtdi.beta_bits, sensor.black_offset_dn, dtdi.subtract_black,
         pedestal_dn=dtdi.pedestal_dn if pedestal_dn is None else pedestal_dn,
     )
-    for got in iter_exposed(itertools.chain([first], chunks), sensor, fp, t_int_s, noise):
-        yield acc.push_many(got.dn)
+    exposed = iter_exposed(itertools.chain([first], chunks), sensor, fp, t_int_s, noise, saturated=saturated)
+    for got in exposed:
+        t0 = time.perf_counter()
+        lines = acc.push_many(got.dn)
+        yield StreamedChunk(got, lines, got.seconds + time.perf_counter() - t0)
+
+
+def iter_sensor_dtdi(
+    photons: np.ndarray | Iterable[np.ndarray],
+    sensor: SensorConfig,
+    dtdi: DTDIConfig,
+    t_int_s: float,
+    stages: Sequence[int],
+    rng: np.random.Generator | np.random.SeedSequence | int,
+    *,
+    fixed: FixedPattern | None = None,
+    pedestal_dn: float | Mapping[int, float] | None = None,
+    chunk_frames: int = DEFAULT_CHUNK_FRAMES,
+) -> Iterator[dict[int, np.ndarray]]:
+    """Stream a pass: expose each chunk of frames and yield the stage lines it completed.
+
+    Memory stays ``O(chunk_frames * R * C)`` for the frames plus the accumulator's ring,
+    whatever the number of lines, as long as the caller does not keep the yielded lines.
+    Arguments as in :func:`sensor_dtdi_pass`; the loop is :func:`iter_stream`.
+
+    Yields
+    ------
+    dict
+        Per chunk: stage ``m`` -> (n, C) ``uint32`` block of its next complete lines (in line
+        order, continuing from the previous block; n may be 0).
+    """
+    if chunk_frames < 1:
+        raise BenchSimError(f"chunk_frames = {chunk_frames!r}: must be >= 1")
+    st = validate_stages(stages)
+    gen = np.random.default_rng(rng)
+    if fixed is None:
+        fixed = draw_fixed_pattern(sensor, gen)
+    noise = seed_sequence(gen)
+    for chunk in iter_stream(
+        photons, sensor, dtdi, t_int_s, st, fixed, noise, pedestal_dn=pedestal_dn, chunk_frames=chunk_frames
+    ):
+        yield chunk.lines
 
 
 def sensor_dtdi_pass(

@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from bench_sim.config import TRA_METHODS
 from bench_sim.errors import BenchSimError
+from bench_sim.fusion.common import FusionResult
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
-from bench_sim.fusion.tonemap import gamma_tra
+from bench_sim.fusion.tonemap import TONEMAP_METHODS, gamma_tra
 from bench_sim.io import (
     check_output_file,
     image_shape,
@@ -45,11 +45,13 @@ from bench_sim.io import (
     write_exr,
     write_png,
 )
-from bench_sim.runtime.resources import check_resources, estimate_fuse
+from bench_sim.runtime.resources import check_resources
 from bench_sim.sensor.model import check_beta_bits
 from bench_sim.version import __version__
+from bench_sim.workflows.estimates import estimate_fuse
 
 __all__ = ["fuse_files", "check_stage_image"]
+
 
 def _where(arr: np.ndarray, mask: np.ndarray) -> tuple[float, str]:
     idx = tuple(int(i) for i in np.argwhere(mask)[0])
@@ -109,6 +111,118 @@ def _read_quietly(path: Path) -> np.ndarray:
         log.setLevel(level)
 
 
+def _check_options(
+    beta: Any, mu1: Any, mu2: Any, tra_method: str, pedestal_dn: float
+) -> tuple[int, int, int]:
+    """``(beta, mu1, mu2)`` checked: integers, a valid word length, ``1 <= mu1 < mu2``; a known
+    display transform and a pedestal below the word clip."""
+    beta = check_beta_bits(_check_int("--beta", beta), "--beta")
+    mu1 = _check_int("--mu1", mu1)
+    mu2 = _check_int("--mu2", mu2)
+    if mu1 < 1:
+        raise BenchSimError(f"--mu1 = {mu1}: must be a DTDI stage >= 1")
+    if mu1 >= mu2:
+        raise BenchSimError(f"--mu1 = {mu1}, --mu2 = {mu2}: need mu1 < mu2 (1 <= mu1 < mu2)")
+    if tra_method not in TONEMAP_METHODS:
+        raise BenchSimError(f"tra method = {tra_method!r}: allowed {', '.join(TONEMAP_METHODS)}")
+    if not (np.isfinite(pedestal_dn) and 0 <= pedestal_dn < 2**beta - 1):
+        raise BenchSimError(
+            f"--pedestal = {pedestal_dn!r}: must lie in 0..{2**beta - 1} DN (below the word clip)"
+        )
+    return beta, mu1, mu2
+
+
+def _check_outputs(low_p: Path, high_p: Path, out_p: Path, tra_p: Path | None) -> None:
+    """The output files writable, of the right kinds, and none of them an input or each other."""
+    check_output_file(out_p, "--out", ".exr")
+    inputs = {low_p.resolve(), high_p.resolve()}
+    if out_p.resolve() in inputs:
+        raise BenchSimError(f"--out = {out_p}: is one of the input files; choose another name")
+    if tra_p is not None:
+        check_output_file(tra_p, "--tra", ".png")
+        if tra_p.resolve() in inputs:
+            raise BenchSimError(f"--tra = {tra_p}: is one of the input files; choose another name")
+        if tra_p.resolve() == out_p.resolve():
+            raise BenchSimError(f"--tra = {tra_p}: same file as --out")
+
+
+def _read_stages(low_p: Path, high_p: Path, mu1: int, mu2: int, beta: int) -> tuple[np.ndarray, np.ndarray]:
+    """The two stage images [DN], each checked (:func:`check_stage_image`), of one shape."""
+    g1 = _read_quietly(low_p)
+    g2 = _read_quietly(high_p)
+    check_stage_image(g1, f"{low_p} (LOW, stage mu1 = {mu1})", beta)
+    check_stage_image(g2, f"{high_p} (HIGH, stage mu2 = {mu2})", beta)
+    if g1.shape != g2.shape:
+        raise BenchSimError(
+            f"{high_p}: shape {g2.shape} differs from {low_p} shape {g1.shape}; the two stage "
+            "images must be the same size"
+        )
+    return g1, g2
+
+
+def _hdr_meta(
+    inputs: dict[str, tuple[Path, np.ndarray]],
+    result: FusionResult,
+    mu1: int,
+    mu2: int,
+    beta: int,
+    pedestal_dn: float,
+) -> dict[str, Any]:
+    """The ``bench_sim`` attribute of the HDR EXR: inputs (path, SHA-256, shape), stages, word,
+    eq. 11 threshold, full scale, counts, units and the package version."""
+    return {
+        "kind": "Gamma_HDR",
+        "method": "paper eq. 11 (fuse_dtdi_hdr_eq11)",
+        "version": __version__,
+        "inputs": {
+            k: {"path": str(p), "sha256": sha256_file(p), "shape": list(g.shape)}
+            for k, (p, g) in inputs.items()
+        },
+        "mu1": mu1,
+        "mu2": mu2,
+        "beta": beta,
+        "phi_fs_dn": 2**beta,
+        "pedestal_dn": float(pedestal_dn),
+        "threshold_dn": eq11_threshold_dn(mu1, mu2, beta, float(pedestal_dn)),
+        "full_scale_dn": result.full_scale_dn,
+        "units": f"DN in stage-mu2 (= {mu2}) units",
+        "channels": {
+            "Y": "Gamma_HDR [DN, stage-mu2 units]",
+            "source": f"stage the pixel came from: {mu2} = gamma2 (eq. 10), {mu1} = (mu2/mu1)*gamma1 (eq. 8)",
+        },
+        "pixels_from_low": int(np.count_nonzero(result.source == mu1)),
+        "pixels_saturated": int(np.count_nonzero(result.saturated)),
+    }
+
+
+def _write_outputs(
+    out_p: Path,
+    tra_p: Path | None,
+    result: FusionResult,
+    meta: dict[str, Any],
+    tra_method: str,
+    display: np.ndarray | None,
+) -> None:
+    """Write the HDR EXR and, with ``tra_p``, the ``Gamma_TRA`` PNG: both files or neither."""
+    dests = [out_p] if tra_p is None else [out_p, tra_p]
+    with output_files(dests) as tmps:  # both files or neither
+        write_exr(tmps[0], {"Y": result.hdr, "source": result.source.astype(np.float32)}, meta)
+        if tra_p is not None and display is not None:
+            tra_meta = {
+                "kind": "Gamma_TRA",
+                "tra": tra_method,
+                "formula": TONEMAP_METHODS[tra_method].formula,
+                "x": "Gamma_HDR [DN]",
+                "X_full_scale_dn": result.full_scale_dn,
+                "bits": 8,
+                "hdr": str(out_p),
+                "mu1": meta["mu1"],
+                "mu2": meta["mu2"],
+                "beta": meta["beta"],
+                "version": __version__,
+            }
+            write_png(tmps[1], display, tra_meta)
+
 
 def fuse_files(
     low: str | os.PathLike[str],
@@ -157,84 +271,15 @@ def fuse_files(
     """
     low_p, high_p, out_p = Path(low), Path(high), Path(out)
     tra_p = Path(tra) if tra is not None else None
-    beta = check_beta_bits(_check_int("--beta", beta), "--beta")
-    mu1 = _check_int("--mu1", mu1)
-    mu2 = _check_int("--mu2", mu2)
-    if mu1 < 1:
-        raise BenchSimError(f"--mu1 = {mu1}: must be a DTDI stage >= 1")
-    if mu1 >= mu2:
-        raise BenchSimError(f"--mu1 = {mu1}, --mu2 = {mu2}: need mu1 < mu2 (1 <= mu1 < mu2)")
-    if tra_method not in TRA_METHODS:
-        raise BenchSimError(f"tra method = {tra_method!r}: allowed {', '.join(TRA_METHODS)}")
-    if not (np.isfinite(pedestal_dn) and 0 <= pedestal_dn < 2**beta - 1):
-        raise BenchSimError(
-            f"--pedestal = {pedestal_dn!r}: must lie in 0..{2**beta - 1} DN (below the word clip)"
-        )
-    check_output_file(out_p, "--out", ".exr")
-    inputs = {low_p.resolve(), high_p.resolve()}
-    if out_p.resolve() in inputs:
-        raise BenchSimError(f"--out = {out_p}: is one of the input files; choose another name")
-    if tra_p is not None:
-        check_output_file(tra_p, "--tra", ".png")
-        if tra_p.resolve() in inputs:
-            raise BenchSimError(f"--tra = {tra_p}: is one of the input files; choose another name")
-        if tra_p.resolve() == out_p.resolve():
-            raise BenchSimError(f"--tra = {tra_p}: same file as --out")
+    beta, mu1, mu2 = _check_options(beta, mu1, mu2, tra_method, pedestal_dn)
+    _check_outputs(low_p, high_p, out_p, tra_p)
     # sizes from the headers, before decoding anything
     shapes = {p: image_shape(p) for p in (low_p, high_p)}
     check_resources(estimate_fuse(max(shapes.values(), key=math.prod), tra_p is not None), out_p.parent)
 
-    g1 = _read_quietly(low_p)
-    g2 = _read_quietly(high_p)
-    check_stage_image(g1, f"{low_p} (LOW, stage mu1 = {mu1})", beta)
-    check_stage_image(g2, f"{high_p} (HIGH, stage mu2 = {mu2})", beta)
-    if g1.shape != g2.shape:
-        raise BenchSimError(
-            f"{high_p}: shape {g2.shape} differs from {low_p} shape {g1.shape}; the two stage "
-            "images must be the same size"
-        )
-
+    g1, g2 = _read_stages(low_p, high_p, mu1, mu2, beta)
     result = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=float(pedestal_dn))
     display = gamma_tra(result.hdr, tra_method, full_scale_dn=result.full_scale_dn) if tra_p else None
-    meta: dict[str, Any] = {
-        "kind": "Gamma_HDR",
-        "method": "paper eq. 11 (fuse_dtdi_hdr_eq11)",
-        "version": __version__,
-        "inputs": {
-            "low": {"path": str(low_p), "sha256": sha256_file(low_p), "shape": list(g1.shape)},
-            "high": {"path": str(high_p), "sha256": sha256_file(high_p), "shape": list(g2.shape)},
-        },
-        "mu1": mu1,
-        "mu2": mu2,
-        "beta": beta,
-        "phi_fs_dn": 2**beta,
-        "pedestal_dn": float(pedestal_dn),
-        "threshold_dn": eq11_threshold_dn(mu1, mu2, beta, float(pedestal_dn)),
-        "full_scale_dn": result.full_scale_dn,
-        "units": f"DN in stage-mu2 (= {mu2}) units",
-        "channels": {
-            "Y": "Gamma_HDR [DN, stage-mu2 units]",
-            "source": f"stage the pixel came from: {mu2} = gamma2 (eq. 10), {mu1} = (mu2/mu1)*gamma1 (eq. 8)",
-        },
-        "pixels_from_low": int(np.count_nonzero(result.source == mu1)),
-        "pixels_saturated": int(np.count_nonzero(result.saturated)),
-    }
-    dests = [out_p] if tra_p is None else [out_p, tra_p]
-    with output_files(dests) as tmps:  # both files or neither
-        write_exr(tmps[0], {"Y": result.hdr, "source": result.source.astype(np.float32)}, meta)
-        if tra_p is not None and display is not None:
-            tra_meta = {
-                "kind": "Gamma_TRA",
-                "tra": tra_method,
-                "formula": TRA_METHODS[tra_method],
-                "x": "Gamma_HDR [DN]",
-                "X_full_scale_dn": result.full_scale_dn,
-                "bits": 8,
-                "hdr": str(out_p),
-                "mu1": mu1,
-                "mu2": mu2,
-                "beta": beta,
-                "version": __version__,
-            }
-            write_png(tmps[1], display, tra_meta)
+    meta = _hdr_meta({"low": (low_p, g1), "high": (high_p, g2)}, result, mu1, mu2, beta, pedestal_dn)
+    _write_outputs(out_p, tra_p, result, meta, tra_method, display)
     return {**meta, "out": str(out_p), "tra": str(tra_p) if tra_p else None}

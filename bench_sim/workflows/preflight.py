@@ -2,7 +2,8 @@
 
 In this order (cheap first): the output folder can receive an output set
 (:func:`bench_sim.io.check_output_dir`), the run fits in the memory and on the disk available
-(:func:`bench_sim.runtime.resources.check_resources` with the command's estimate), the target image
+(:func:`bench_sim.runtime.resources.check_resources` with the command's estimate,
+:mod:`bench_sim.workflows.estimates`), the target image
 file reads (``target.layout = "image"``), and the rendering backend chosen or forced can run
 (:func:`bench_sim.runtime.backend.select_backend`). Each failure is one
 :class:`~bench_sim.errors.BenchSimError` line; nothing has been written then.
@@ -18,9 +19,18 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import overload
+
+import numpy as np
 
 from bench_sim.config import BenchConfig
-from bench_sim.runtime.resources import ResourceEstimate, check_resources
+from bench_sim.errors import BenchSimError
+from bench_sim.fusion.tonemap import check_tonemap_method
+from bench_sim.io import check_output_dir
+from bench_sim.rig.target_sources import check_target_image
+from bench_sim.runtime.backend import select_backend
+from bench_sim.runtime.resources import ResourceEstimate, check_resources, local_concurrency
+from bench_sim.workflows.estimates import estimate_simulate, estimate_tasks
 
 __all__ = ["preflight", "preflight_tasks", "check_seed", "SEED_MAX"]
 
@@ -31,15 +41,21 @@ SEED_MAX = 2**63 - 1
 def check_seed(seed: object, what: str = "--seed") -> int:
     """A root seed: an integer in ``0 .. 2**63 - 1`` (:data:`SEED_MAX`). Raises
     :class:`~bench_sim.errors.BenchSimError` naming ``what`` otherwise."""
-    import numpy as np
-
-    from bench_sim.errors import BenchSimError
-
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= int(seed) <= SEED_MAX:
         raise BenchSimError(f"{what} = {seed!r}: must be an integer in 0..2**63-1")
     return int(seed)
 
 
+@overload
+def preflight(
+    cfg: BenchConfig | None, *, out: str | os.PathLike[str], estimate: ResourceEstimate | None,
+    render: bool = ..., what: str = ...,
+) -> Path: ...
+@overload
+def preflight(
+    cfg: BenchConfig | None, *, out: None, estimate: ResourceEstimate | None,
+    render: bool = ..., what: str = ...,
+) -> None: ...
 def preflight(
     cfg: BenchConfig | None,
     *,
@@ -68,18 +84,14 @@ def preflight(
     Path or None
         ``out`` resolved.
     """
-    from bench_sim.io import check_output_dir
-
+    if cfg is not None:  # a config value, refused first as load_config's errors are
+        check_tonemap_method(cfg.fusion.tra)
     out_path = check_output_dir(out, what) if out is not None else None
     if estimate is not None:
         check_resources(estimate, out_path)
     if cfg is not None:
-        from bench_sim.rig.target_sources import check_target_image
-
         check_target_image(cfg.target)
         if render:
-            from bench_sim.runtime.backend import select_backend
-
             select_backend(cfg.render.variant, "spectral" if cfg.render.spectral else "mono")
     return out_path
 
@@ -96,7 +108,7 @@ def preflight_tasks(
 ) -> None:
     """Check a run of many simulation passes (sweep points, data-set samples) before any runs.
 
-    The largest task (one pass with its truth, :func:`bench_sim.runtime.resources.estimate_simulate`)
+    The largest task (one pass with its truth, :func:`bench_sim.workflows.estimates.estimate_simulate`)
     times the worker processes that run at once on this machine
     (:func:`bench_sim.runtime.resources.local_concurrency`; none with a ``scheduler``: the cluster's
     machines run them) must fit in the memory available, and ``disk_bytes`` on the disk of
@@ -104,13 +116,6 @@ def preflight_tasks(
     task's config (the backend only for local workers). The output folder itself is the
     caller's to check (resumable runs reuse theirs).
     """
-    from bench_sim.runtime.resources import (
-        check_resources,
-        estimate_simulate,
-        estimate_tasks,
-        local_concurrency,
-    )
-
     sized = [(estimate_simulate(cfg, stages), cfg) for cfg, stages in tasks]
     if not sized:
         return

@@ -20,8 +20,12 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.io import read_exr, write_exr, write_json
+from bench_sim.io import output_set, read_exr, write_exr, write_json
+from bench_sim.render.exposures import render_photons
+from bench_sim.render.texture import ground_truth_reflectance
 from bench_sim.runtime.provenance import provenance, render_provenance
+from bench_sim.workflows.estimates import estimate_render
+from bench_sim.workflows.preflight import check_seed, preflight
 
 __all__ = ["run_render", "read_exposures"]
 
@@ -41,11 +45,6 @@ def run_render(
     Everything is checked first (frames, engine, seed, output folder, memory and disk, target
     image, backend); ``meta.json``'s ``wall_s`` is the only wall-clock time (the EXR files of two
     runs with the same config and seed are identical)."""
-    from bench_sim.io import output_set
-    from bench_sim.render.exposures import render_photons
-    from bench_sim.render.texture import ground_truth_reflectance
-    from bench_sim.runtime.resources import estimate_render
-    from bench_sim.workflows.preflight import check_seed, preflight
 
     if isinstance(frames, bool) or not isinstance(frames, int | np.integer) or frames < 1:
         raise BenchSimError(f"--frames = {frames!r}: must be an integer >= 1")

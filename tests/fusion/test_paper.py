@@ -12,6 +12,9 @@ from bench_sim.fusion import (
     fuse_stages_highest_unsaturated,
 )
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 
 def test_threshold_is_phi_fs_over_stage_ratio() -> None:
     # eq. 4 and eq. 9: Phi_FS / (mu2/mu1) = 4096 / 8

@@ -12,7 +12,16 @@ import pytest
 
 from bench_sim import io as bio
 from bench_sim.errors import BenchSimError
-from bench_sim.io import OUTPUT_MARKER, OutputWriteError, output_files, output_set, read_output_record
+from bench_sim.io import (
+    OUTPUT_MARKER,
+    OutputWriteError,
+    atomic,
+    output_files,
+    output_set,
+    outputs,
+    read_output_record,
+    umask,
+)
 
 
 def _tree(folder: Path) -> dict[str, bytes]:
@@ -35,20 +44,14 @@ def test_a_rerun_replaces_the_whole_set(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, exchange: bool
 ) -> None:
     if not exchange:
-        monkeypatch.setattr(bio, "_exchange", lambda a, b: False)
+        monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)  # what output_set calls
     out = tmp_path / "out"
     _write_set(out, {"ground_truth.exr": "1", "stage_001/a.tif": "1", "meta.json": "1"}, {"seed": 1})
     _write_set(out, {"meta.json": "2", "stage_002/a.tif": "2"}, {"seed": 2})
     assert set(_tree(out)) == {"meta.json", "stage_002/a.tif", OUTPUT_MARKER}  # nothing of run 1 left
     assert read_output_record(out) == {"seed": 2}
     assert _temporaries(tmp_path) == []
-    assert oct(out.stat().st_mode & 0o777) == oct(0o777 & ~_umask())
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+    assert oct(out.stat().st_mode & 0o777) == oct(0o777 & ~umask())
 
 
 @pytest.mark.parametrize(
@@ -101,7 +104,7 @@ def test_temporaries_of_dead_runs_are_removed_and_live_ones_kept(tmp_path: Path)
     dead_file = Path(tempfile.mkstemp(prefix=f".out.partial-{_dead_pid()}-", dir=tmp_path)[1])
     live = Path(tempfile.mkdtemp(prefix=f".out.partial-{os.getpid()}-", dir=tmp_path))
     fd = os.open(live, os.O_RDONLY)
-    bio._lock(fd)  # a run that is still writing holds the lock
+    atomic._lock(fd)  # a run that is still writing holds the lock
     try:
         _write_set(out, {"a.txt": "x"})
         assert not dead.exists() and not dead_file.exists() and live.is_dir()
@@ -119,7 +122,7 @@ def test_a_set_moved_aside_by_a_killed_run_is_put_back(tmp_path: Path) -> None:
     _write_set(out, {"a.txt": "old"})
     old = Path(tempfile.mkdtemp(prefix=f".out.old-{_dead_pid()}-", dir=tmp_path))
     os.replace(out, old / "set")
-    bio._remove_stale_temporaries(out)
+    atomic._remove_stale_temporaries(out)
     assert (out / "a.txt").read_text() == "old" and _temporaries(tmp_path) == []
 
 
@@ -166,7 +169,7 @@ def test_atomic_exchange_swaps_two_folders(tmp_path: Path) -> None:
     b.mkdir()
     (a / "x").write_text("a")
     (b / "x").write_text("b")
-    if bio._exchange(a, b):  # Linux with renameat2 (every CI machine of this project)
+    if outputs._exchange(a, b):  # Linux with renameat2 (every CI machine of this project)
         assert (a / "x").read_text() == "b" and (b / "x").read_text() == "a"
     else:  # pragma: no cover - other systems: the two-rename path is tested above
         assert (a / "x").read_text() == "a"

@@ -49,20 +49,20 @@ def test_word_limited_gain_over_gamma2_is_eq15_by_construction(dr12: ChainDR) ->
     assert abs(dr12.gain_over_gamma2_db - dr_increase_eq15_db(MU1, MU2)) <= 0.75
     # where the linear response meets the plateau (no variance scatter) the two saturation
     # points are exactly mu2/mu1 apart: the construction itself, to a few thousandths of a dB
-    ext = dr12.images["hdr"].dr_db_extrapolated - dr12.images["gamma2"].dr_db_extrapolated
+    ext = dr12.images["gamma_hdr"].dr_db_extrapolated - dr12.images["gamma2"].dr_db_extrapolated
     assert abs(ext - dr_increase_eq15_db(MU1, MU2)) <= 0.02
     img = dr12.images
-    assert img["hdr"].photons_min == pytest.approx(img["gamma2"].photons_min)
-    assert img["hdr"].photons_sat == pytest.approx(img["gamma1"].photons_sat, rel=0.02)
+    assert img["gamma_hdr"].photons_min == pytest.approx(img["gamma2"].photons_min)
+    assert img["gamma_hdr"].photons_sat == pytest.approx(img["gamma1"].photons_sat, rel=0.02)
 
 
 def test_gain_over_gamma1_is_the_read_noise_ratio(dr12: ChainDR) -> None:
     """Over Gamma1 the HDR gains only at the dark end: the read noise of the digital sum grows as
     sqrt(m), so about 10 lg(mu2/mu1) = 9 dB, and it agrees with the sensor model's prediction."""
-    model_gain = dr12.model_dr_db["hdr"] - dr12.model_dr_db["gamma1"]
+    model_gain = dr12.model_dr_db["gamma_hdr"] - dr12.model_dr_db["gamma1"]
     assert dr12.gain_over_gamma1_db == pytest.approx(model_gain, abs=0.5)
     assert dr12.gain_over_gamma1_db == pytest.approx(10 * math.log10(MU2 / MU1), abs=1.0)
-    for name in ("gamma1", "gamma2", "hdr"):
+    for name in ("gamma1", "gamma2", "gamma_hdr"):
         # the model's clip is where the linear response meets the plateau (extrapolated point);
         # EMVA's variance maximum lies a little below it
         img = dr12.images[name]
@@ -120,7 +120,7 @@ def test_hdr_monotonic_noise_off() -> None:
 def test_hdr_monotonic_averaged_with_noise(dr12: ChainDR) -> None:
     """With all noise on, the level means of Gamma_HDR rise with the signal (to 4 standard errors)."""
     n_pix = dr12.lines * dr12.columns * 2
-    hdr = dr12.images["hdr"]
+    hdr = dr12.images["gamma_hdr"]
     se = hdr.temporal_std_dn / math.sqrt(n_pix)
     assert np.all(np.diff(hdr.mean_dn) >= -4 * np.sqrt(se[1:] ** 2 + se[:-1] ** 2))
     assert hdr.mean_dn[-1] > 7 * 4095 * 0.9  # reaches the extended range
@@ -151,7 +151,7 @@ def test_gain_without_black_subtraction() -> None:
     assert not r.gain_over_gamma2_by_construction
     ranges = [4095 - r.offsets_dn[m] for m in (MU1, MU2)]
     predicted = dr_increase_eq15_db(MU1, MU2) + 20 * math.log10(ranges[0] / ranges[1])
-    ext = r.images["hdr"].dr_db_extrapolated - r.images["gamma2"].dr_db_extrapolated
+    ext = r.images["gamma_hdr"].dr_db_extrapolated - r.images["gamma2"].dr_db_extrapolated
     assert ext == pytest.approx(predicted, abs=0.3)  # the clip points: exact up to noise
     assert r.gain_over_gamma2_db == pytest.approx(predicted, abs=1.5)  # variance maxima: near it
 

@@ -8,8 +8,8 @@ import pytest
 
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.measure.pass_metrics import pass_metrics
+from bench_sim.pipeline import run_pass
 from bench_sim.sensor.model import stage_offset_dn
-from bench_sim.workflows.simulate import run_pass
 from tests.conftest import tiny_cfg
 
 

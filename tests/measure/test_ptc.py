@@ -14,7 +14,7 @@ import bench_sim
 from bench_sim.cli import app
 from bench_sim.config import BenchConfig, config_from_dict, config_sha256
 from bench_sim.errors import BenchSimError
-from bench_sim.measure.ptc import run_ptc
+from bench_sim.workflows.ptc_job import run_ptc
 
 SMALL = {
     "sensor": {"rows": 16, "columns": 128},

@@ -23,6 +23,9 @@ from bench_sim.metrics.emva1288 import (
     stack_mean_var,
 )
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 
 def clipped_normal_mean_var(mu: np.ndarray, sigma: np.ndarray, clip: float) -> tuple[np.ndarray, np.ndarray]:
     """Mean and variance of min(X, clip) for X ~ N(mu, sigma^2) (closed form)."""

@@ -17,6 +17,9 @@ from bench_sim.metrics.histogram import (
 )
 from bench_sim.metrics.snr import patch_snr, snr_versus_signal
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 
 # ---------------------------------------------------------------- eq. 15
 def test_eq15_values() -> None:

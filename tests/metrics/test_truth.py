@@ -13,6 +13,9 @@ from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dyna
 from bench_sim.sensor.model import stage_mean_var_dn
 from tests.conftest import TINY
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 
 @pytest.mark.parametrize("irradiance_w_m2", [0.5, 6.0])
 def test_truth_snr_of_a_uniform_field_is_the_closed_form(irradiance_w_m2):

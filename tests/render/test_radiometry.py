@@ -19,6 +19,9 @@ from bench_sim.rig.geometry import rig_geometry
 from bench_sim.runtime.backend import init_mitsuba
 from tests.conftest import tiny_cfg
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 
 def test_diffuse_plane_under_directional_light_is_rho_e_cos_over_pi():
     """Mitsuba's film holds radiance: a Lambertian plane (albedo 0.5) lit by a directional

@@ -9,6 +9,9 @@ from bench_sim.render.texture import ground_truth_reflectance, run_texture
 from bench_sim.rig.geometry import rig_geometry
 from tests.conftest import make_cfg, tiny_cfg
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 
 def test_row_angles_follow_the_law_of_sines():
     """A chief ray leaving the lens at alpha below the axis meets the drum where

@@ -11,11 +11,14 @@ import pytest
 from scipy import integrate
 
 from bench_sim.config import ConfigError, load_config
+from bench_sim.pipeline import run_pass
 from bench_sim.render.exposures import prepare
 from bench_sim.rig.lights import flicker_fundamental, frame_weights, window_mean
 from bench_sim.rig.scene import area_radiance_w_m2_sr, light_names
-from bench_sim.workflows.simulate import run_pass
 from tests.conftest import ALL_OFF, make_cfg, tiny_cfg
+
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
 
 R = 0.10  # the default drum radius: the camera looks at (0, 0, R)
 OFF = {"strong": {"enabled": False}, "weak": {"enabled": False}}

@@ -114,7 +114,7 @@ def test_scalar_fallback_renders_the_same_rig(tmp_path):
         "    out[eng] = [s.info['variant'], float(ph.mean())]\n"
         "print(json.dumps(out))\n"
     )
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # the repository
     res = {}
     for variant in ("scalar", "auto"):
         env = dict(os.environ, BENCH_SIM_VARIANT=variant, PYTHONPATH=root)

@@ -24,6 +24,9 @@ from bench_sim.sensor.emva import draw_fixed_pattern, expose, pixel_mean_var_dn
 from bench_sim.sensor.stream import sensor_dtdi_pass
 from tests.conftest import ALL_OFF
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 T_INT_S = 100e-6
 
 

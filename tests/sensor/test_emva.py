@@ -17,6 +17,9 @@ from bench_sim.sensor.emva import (
 )
 from tests.conftest import ALL_OFF
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 T_INT_S = 100e-6
 
 

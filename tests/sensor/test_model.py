@@ -26,6 +26,9 @@ from bench_sim.sensor.model import (
 )
 from bench_sim.sensor.stream import sensor_dtdi_pass
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 T_INT_S = 100e-6
 NO_FPN = {"prnu_enabled": False, "dsnu_enabled": False, "column_fpn": False}
 

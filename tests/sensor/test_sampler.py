@@ -23,6 +23,9 @@ from bench_sim.sensor.emva import (
 )
 from tests.conftest import ALL_OFF, tiny_cfg
 
+#: closed forms, invariants and seeded statistical tests (make test-fast)
+pytestmark = pytest.mark.physics
+
 T_INT_S = 100e-6
 
 
@@ -127,7 +130,7 @@ def test_hybrid_sampler_matches_the_poisson_moments_on_electrons():
 def test_pass_is_the_same_with_one_and_two_threads(monkeypatch):
     """Every chunk of frames draws from its own stream: 1 or 2 threads, same stage words, same
     truth; a SeedSequence seed is the integer seed's stream."""
-    from bench_sim.workflows.simulate import run_pass
+    from bench_sim.pipeline import run_pass
 
     cfg = tiny_cfg(lines=40)
     out = {}

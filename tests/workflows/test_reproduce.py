@@ -65,6 +65,22 @@ def test_quick_writes_every_file_and_key(quick_runs):
     assert read_png_text(out / "snr_vs_signal.png")["seed"] == 7
 
 
+def _keys(x) -> set:
+    if isinstance(x, dict):
+        return set(x) | set().union(*(_keys(v) for v in x.values()))
+    if isinstance(x, list):
+        return set().union(*(_keys(v) for v in x))
+    return set()
+
+
+def test_images_are_keyed_gamma_hdr_everywhere(quick_runs):
+    """The fused image is ``gamma_hdr`` in every key of metrics.json, the chain's DR details included."""
+    m = json.loads((quick_runs[0] / "metrics.json").read_text())
+    assert "hdr" not in _keys(m)
+    details = m["dr_details"]
+    assert set(details["images"]) == set(details["model_dr_db"]) == {"gamma1", "gamma2", "gamma_hdr"}
+
+
 def test_quick_shows_the_papers_qualitative_result(quick_runs):
     m = json.loads((quick_runs[0] / "metrics.json").read_text())
     bright, dark = m["brightest_patch"], m["darkest_patch"]

@@ -11,8 +11,10 @@ import pytest
 import bench_sim
 from bench_sim.config import config_from_dict
 from bench_sim.errors import BenchSimError
+from bench_sim.pipeline import PASS_VARIABLES, stage_pixel_bytes
 from bench_sim.sensor import stage_mean_var_dn
 from bench_sim.sensor.model import stage_offset_dn
+from bench_sim.workflows.dataset.reader import FUSED_VARIABLES, STAGE_VARIABLES
 from tests.conftest import ALL_OFF, TINY, subpixel_shift
 
 NOISE_OFF = dict(ALL_OFF)
@@ -131,10 +133,10 @@ def test_sync_error_edges_of_dn_and_reflectance_coincide():
 def test_dataset_variables_units_and_provenance():
     ds = bench_sim.simulate(_overrides(), stages=[2, 8], seed=5)
     assert dict(ds.sizes) == {"stage": 2, "line": 48, "column": 48}
-    for name in ("dn", "mean_dn", "photons", "reflectance", "clipped", "hdr", "hdr_source"):
+    for name in ("dn", "mean_dn", "photons", "reflectance", "clipped", "gamma_hdr", "gamma_hdr_source"):
         assert ds[name].attrs["units"] and ds[name].attrs["long_name"], name
     assert np.issubdtype(ds.dn.dtype, np.integer) and ds.clipped.dtype == bool
-    assert ds.hdr.dims == ("line", "column")
+    assert ds.gamma_hdr.dims == ("line", "column")
     cfg = config_from_dict(tomllib.loads(ds.attrs["config"]))
     assert cfg == config_from_dict(_overrides())
     assert ds.attrs["config_sha256"] == hashlib.sha256(
@@ -145,6 +147,17 @@ def test_dataset_variables_units_and_provenance():
     # truth is physical: reflectance in 0..1, photons >= 0, words clip only at the top
     assert 0 <= float(ds.reflectance.min()) and float(ds.reflectance.max()) <= 1
     assert float(ds.photons.min()) >= 0
+    # the one variables table drives the dataset, the data set's dtypes and the memory estimate
+    assert list(ds.data_vars) == [v.name for v in PASS_VARIABLES]
+    for v in PASS_VARIABLES:
+        assert ds[v.name].dims == v.dims and ds[v.name].dtype == v.array_dtype(ds.attrs["beta_bits"]), v
+        assert (ds[v.name].attrs["units"], ds[v.name].attrs["long_name"]) == (v.units, v.doc), v
+    stored = [*STAGE_VARIABLES.values(), *FUSED_VARIABLES.values()]  # the data set may rename them
+    assert stored == [v.stored_dtype for v in PASS_VARIABLES]
+    assert stage_pixel_bytes(12, truth=False) == ds.dn.dtype.itemsize == 2
+    per_pixel = sum(ds[v].dtype.itemsize for v in ds.data_vars if "stage" in ds[v].dims)
+    assert stage_pixel_bytes(12, truth=True) == per_pixel
+    assert stage_pixel_bytes(None, truth=True) == 4 + 8 + 8 + 4 + 1
 
 
 def test_same_seed_same_data_and_no_hdr_without_both_stages():
@@ -153,7 +166,7 @@ def test_same_seed_same_data_and_no_hdr_without_both_stages():
     c = bench_sim.simulate(_overrides(), stages=[3], seed=10)
     assert a.identical(b)
     assert not np.array_equal(a.dn.values, c.dn.values)
-    assert "hdr" not in a and "hdr_source" not in a
+    assert "gamma_hdr" not in a and "gamma_hdr_source" not in a
 
 
 @pytest.mark.parametrize(
@@ -175,9 +188,9 @@ def test_run_pass_gives_the_previous_pipelines_stage_images(truth):
     the stage words of the render -> ``sensor_dtdi_pass`` chain it replaced, bit for bit, and
     leaves the generator in the same state (the DR measurement draws from it next), so every
     number in ``metrics.json`` is unchanged."""
+    from bench_sim.pipeline import run_pass
     from bench_sim.render.exposures import iter_photon_frames, prepare
     from bench_sim.sensor.stream import sensor_dtdi_pass
-    from bench_sim.workflows.simulate import run_pass
 
     cfg = config_from_dict(_overrides(timing={"sync_error": 0.02}))
     stages = [1, 2, 5, 8, 12]
@@ -287,7 +300,7 @@ def test_cli_writes_each_format(tmp_path, fmt):
                 arr = tifffile.imread(out / name)
                 assert arr.dtype.itemsize == 4 and meta["files"][name]["units"]
                 np.testing.assert_allclose(arr, ref[var].sel(stage=m).values, rtol=1e-6)
-        assert (out / "hdr.tiff").is_file() and (out / "hdr_source.tiff").is_file()
+        assert (out / "gamma_hdr.tiff").is_file() and (out / "gamma_hdr_source.tiff").is_file()
 
 
 @pytest.mark.parametrize(

@@ -3,7 +3,7 @@
 The card says what is in a dataset (samples, stages, size, variables with units and types),
 whether it is complete, how it was made (command, spec, seed, version, the streams), the
 randomised values drawn and the summary metrics, and how to load it. The sheet shows the first
-complete samples: the image the camera gives (``Gamma_TRA`` of ``hdr`` when two stages are
+complete samples: the image the camera gives (``Gamma_TRA`` of ``gamma_hdr`` when two stages are
 fused, else the highest stage on one display scale) beside the reflectance truth behind it.
 Nothing in either depends on the wall clock, so the same dataset gives the same card.
 """
@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from bench_sim.fusion.tonemap import tone_map
+from bench_sim.io import format_bytes, markdown_table, write_png, write_text
 from bench_sim.workflows.dataset.reader import (
     CARD,
     COMPLETION_RECORD,
@@ -28,6 +30,7 @@ from bench_sim.workflows.dataset.reader import (
     iter_samples,
     read_info,
 )
+from bench_sim.workflows.reproduce.figures import stage_display
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -57,12 +60,6 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def _table(header: list[str], rows: list[list[Any]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    out += ["| " + " | ".join(_fmt(c) for c in r) + " |" for r in rows]
-    return out
-
-
 def write_thumbnails(
     out: Path, spec: DatasetSpec, indices: list[int], provenance: dict[str, Any] | None = None
 ) -> Path | None:
@@ -77,11 +74,7 @@ def write_thumbnails(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bench_sim.fusion.tonemap import tone_map
-    from bench_sim.io import write_png
-    from bench_sim.workflows.reproduce.figures import stage_display
-
-    variables = ["dn", "reflectance"] + (["hdr"] if spec.fused else [])
+    variables = ["dn", "reflectance"] + (["gamma_hdr"] if spec.fused else [])
     per_row = 4
     rows = -(-len(indices) // per_row)
     lines, cols = spec.base.lines, spec.base.sensor.columns
@@ -97,7 +90,7 @@ def write_thumbnails(
     for k, sample in enumerate(iter_samples(out, variables=variables, only=indices, incomplete=True)):
         ax_img, ax_truth = axes[k // per_row, 2 * (k % per_row)], axes[k // per_row, 2 * (k % per_row) + 1]
         if spec.fused:
-            img = tone_map(sample.arrays["hdr"], spec.base.fusion.tra)
+            img = tone_map(sample.arrays["gamma_hdr"], spec.base.fusion.tra)
             what = f"HDR ({spec.base.fusion.tra})"
         else:
             img = stage_display(sample.arrays["dn"][-1], beta)
@@ -116,8 +109,9 @@ def write_thumbnails(
     )
     fig.tight_layout()
     meta = {**(provenance or {}), "dataset": spec.name, "seed": spec.seed, "samples": indices}
-    fig.canvas.draw()
-    grey = np.asarray(fig.canvas.buffer_rgba())[..., 0].copy()  # a grey figure: R = G = B
+    canvas: Any = fig.canvas  # Agg: has buffer_rgba
+    canvas.draw()
+    grey = np.asarray(canvas.buffer_rgba())[..., 0].copy()  # a grey figure: R = G = B
     plt.close(fig)
     return write_png(out / THUMBNAILS, grey, meta)  # 8-bit grey: a third of the RGBA file
 
@@ -156,36 +150,19 @@ def _randomized_rows(spec: DatasetSpec, df: pd.DataFrame) -> list[list[Any]]:
     return rows
 
 
-def write_card(
-    out: Path,
-    spec: DatasetSpec,
-    df: pd.DataFrame,
-    command: str | None = None,
-    provenance: dict[str, Any] | None = None,
-) -> Path:
-    """Write ``DIR/README.md`` and ``DIR/thumbnails.png`` for the dataset in ``out`` with
-    manifest ``df`` (:func:`bench_sim.workflows.dataset.run.manifest_frame`); ``provenance``
-    (version, seed, hashes) goes into the PNG."""
-    from bench_sim.io import format_bytes, write_text
-
-    info = read_info(out)
-    schema = info["schema"]["variables"]
-    complete = [int(i) for i in df["sample"][df.status == "complete"]]
-    failed = int((df.status == "failed").sum())
-    is_done = len(complete) == spec.samples
-    shown = complete[:THUMBNAIL_SAMPLES]
-    write_thumbnails(out, spec, shown, provenance)
+def _intro(
+    spec: DatasetSpec, info: dict[str, Any], complete: list[int], failed: int, shown: list[int],
+    store_bytes: int, cmd: str,
+) -> list[str]:
+    """Title, whether the dataset is complete, what it holds and its size, the thumbnails."""
     lines, cols = spec.base.lines, spec.base.sensor.columns
-    store_bytes = sum(f.stat().st_size for f in (out / DATA_STORE).rglob("*") if f.is_file())
     per_sample = store_bytes / max(len(complete), 1)
-    cmd = command or f"bench-sim dataset {info['spec_file']} --out DIR"
-
     md: list[str] = [f"# Dataset card: {spec.name}", ""]
     if spec.description:
         md += [spec.description.strip(), ""]
     state = (
         f"**Complete**: all {spec.samples} samples (the completion record `{COMPLETION_RECORD}` is written "
-        "last)." if is_done else
+        "last)." if len(complete) == spec.samples else
         f"**Incomplete**: {len(complete)} of {spec.samples} samples complete"
         + (f", {failed} failed" if failed else "")
         + f". `{cmd} --resume` completes it; only samples whose record in `{RECORDS_DIR}/` says "
@@ -204,11 +181,16 @@ def write_card(
         f"![thumbnails]({THUMBNAILS})" if shown else "", "",
         "## Contents", "",
     ]
+    return md
+
+
+def _contents(schema: dict[str, Any]) -> list[str]:
+    """The variables, the files and what the truth and the summary metrics are."""
     var_rows = [
         [f"`{n}`", ", ".join(v["dims"]), v["dtype"], v["units"], v["long_name"]] for n, v in schema.items()
     ]
-    md += _table(["variable", "dimensions", "type", "units", "meaning"], var_rows) + [""]
-    md += _table(["file", "what"], [
+    md = markdown_table(["variable", "dimensions", "type", "units", "meaning"], var_rows, fmt=_fmt) + [""]
+    md += markdown_table(["file", "what"], [
         [f"`{DATA_STORE}`", "the arrays (Zarr v3): one chunk per sample and stage, `units` on every array"],
         [f"`{MANIFEST_PARQUET}`, `{MANIFEST_CSV}`", "one row per sample: `sample`, `seed`, the randomised "
          "values, `config_sha256`, summary metrics, `status`, `error`, `wall_s`, `worker`"],
@@ -218,7 +200,7 @@ def write_card(
          "per-sample record, written after the sample's arrays are on disk"],
         [f"`{CARD}`, `{THUMBNAILS}`", "this card and its thumbnail sheet"],
         [f"`{COMPLETION_RECORD}`", "written last, when every sample is complete"],
-    ]) + [""]
+    ], fmt=_fmt) + [""]
     md += [
         "Truth: `mean_dn` is the exact expectation of `dn` before the word clips (fixed patterns in), "
         "`photons` the mean photons the stage pixel collected, `reflectance` the target reflectance "
@@ -228,6 +210,13 @@ def write_card(
         "`snr_dark_m{m}` / `snr_bright_m{m}` = mean signal above the dark level over the rms of "
         "`dn - mean_dn` in the darkest / brightest tenth of the scene (clipped pixels left out).",
         "",
+    ]
+    return md
+
+
+def _how_made(spec: DatasetSpec, info: dict[str, Any], df: pd.DataFrame, cmd: str) -> list[str]:
+    """The command, seed and streams, the hashes, the spec and the randomised values drawn."""
+    md = [
         "## How it was made", "",
         f"```sh\n{cmd}\n```", "",
         f"Root seed {spec.seed}. {info['streams']}. A sample's content depends only on (spec, seed, i): "
@@ -238,15 +227,24 @@ def write_card(
         "```toml", spec.path.read_text().rstrip(), "```", "",
         "### Randomised values", "",
     ]
-    md += _table(["key", "distribution", "drawn (complete samples)"], _randomized_rows(spec, df)) + [""]
+    md += markdown_table(
+        ["key", "distribution", "drawn (complete samples)"], _randomized_rows(spec, df), fmt=_fmt
+    ) + [""]
+    return md
+
+
+def _metrics(spec: DatasetSpec, df: pd.DataFrame) -> list[str]:
+    """The summary metrics over the complete samples and, for small datasets, each sample."""
+    md: list[str] = []
     metric_cols = [c for c in df.columns if c == "scene_dr_db" or c.startswith(("saturated_", "snr_"))]
     done = df[df.status == "complete"]
     if len(done):
         md += ["### Summary metrics", ""]
-        md += _table(["metric", "samples with a value", "min", "median", "max"], [
+        md += markdown_table(["metric", "samples with a value", "min", "median", "max"], [
             [f"`{c}`", int(done[c].notna().sum()), done[c].min(), done[c].median(), done[c].max()]
             for c in metric_cols
-        ]) + ["", "A metric has no value (`nan`) where its region clipped entirely at that stage.", ""]
+        ], fmt=_fmt)
+        md += ["", "A metric has no value (`nan`) where its region clipped entirely at that stage.", ""]
     if len(done) and spec.samples <= LISTED_SAMPLES:
         keys = list(spec.randomize)
         head = ["sample", *[f"`{k}`" for k in keys], "scene_dr_db",
@@ -258,19 +256,46 @@ def write_card(
             ]
             rows.append([d["sample"], *vals, d["scene_dr_db"],
                          *[d[f"saturated_fraction_m{m}"] for m in spec.stages]])
-        md += ["### Samples", ""] + _table(head, rows) + [""]
-    md += [
-        "## How to load it", "",
-        "```python",
-        "import bench_sim",
-        "ds = bench_sim.dataset.open(DIR)      # xarray.Dataset, lazy; manifest columns as coordinates",
-        'ds.dn.sel(stage=80).isel(sample=0)     # one stage image; ds["lights.strong.irradiance_w_m2"] ...',
-        "for s in bench_sim.dataset.iter_samples(DIR):   # numpy only, one sample at a time",
-        '    s.arrays["dn"], s.arrays["mean_dn"], s.values, s.metrics',
-        "```", "",
-        "Or with the libraries themselves: `xarray.open_zarr(DIR + '/data.zarr')` (keep the samples "
-        "whose record is complete), `pandas.read_parquet(DIR + '/manifest.parquet')`, "
-        "`pandas.read_csv(DIR + '/manifest.csv', comment='#')`.", "",
-    ]
-    return write_text(out / CARD, "\n".join(md).replace("\n\n\n", "\n\n"))
+        md += ["### Samples", ""] + markdown_table(head, rows, fmt=_fmt) + [""]
+    return md
 
+
+#: How to load a dataset (the card's last section)
+HOW_TO_LOAD = [
+    "## How to load it", "",
+    "```python",
+    "import bench_sim",
+    "ds = bench_sim.dataset.open(DIR)      # xarray.Dataset, lazy; manifest columns as coordinates",
+    'ds.dn.sel(stage=80).isel(sample=0)     # one stage image; ds["lights.strong.irradiance_w_m2"] ...',
+    "for s in bench_sim.dataset.iter_samples(DIR):   # numpy only, one sample at a time",
+    '    s.arrays["dn"], s.arrays["mean_dn"], s.values, s.metrics',
+    "```", "",
+    "Or with the libraries themselves: `xarray.open_zarr(DIR + '/data.zarr')` (keep the samples "
+    "whose record is complete), `pandas.read_parquet(DIR + '/manifest.parquet')`, "
+    "`pandas.read_csv(DIR + '/manifest.csv', comment='#')`.", "",
+]
+
+
+def write_card(
+    out: Path,
+    spec: DatasetSpec,
+    df: pd.DataFrame,
+    command: str | None = None,
+    provenance: dict[str, Any] | None = None,
+) -> Path:
+    """Write ``DIR/README.md`` and ``DIR/thumbnails.png`` for the dataset in ``out`` with
+    manifest ``df`` (:func:`bench_sim.workflows.dataset.store.manifest_frame`); ``provenance``
+    (version, seed, hashes) goes into the PNG."""
+    info = read_info(out)
+    complete = [int(i) for i in df["sample"][df.status == "complete"]]
+    failed = int((df.status == "failed").sum())
+    shown = complete[:THUMBNAIL_SAMPLES]
+    write_thumbnails(out, spec, shown, provenance)
+    store_bytes = sum(f.stat().st_size for f in (out / DATA_STORE).rglob("*") if f.is_file())
+    cmd = command or f"bench-sim dataset {info['spec_file']} --out DIR"
+    md = _intro(spec, info, complete, failed, shown, store_bytes, cmd)
+    md += _contents(info["schema"]["variables"])
+    md += _how_made(spec, info, df, cmd)
+    md += _metrics(spec, df)
+    md += HOW_TO_LOAD
+    return write_text(out / CARD, "\n".join(md).replace("\n\n\n", "\n\n"))

@@ -10,11 +10,12 @@ Layout of ``DIR`` (the writer is :mod:`bench_sim.workflows.dataset.run`):
 
 =========================== =====================================================================
 ``data.zarr``               Zarr v3: ``dn``, ``mean_dn``, ``photons``, ``reflectance``,
-                            ``clipped`` (``sample, stage, line, column``), ``hdr`` and
-                            ``hdr_source`` (``sample, line, column``) when two stages are fused;
+                            ``clipped`` (``sample, stage, line, column``), ``gamma_hdr`` and
+                            ``gamma_hdr_source`` (``sample, line, column``) when two stages are fused;
                             one chunk per sample and stage; ``units`` on every array
 ``samples/NNNNNNNN.json``   one record per finished sample, written after its arrays are on
                             disk: status (``complete`` / ``failed``), values, metrics, time
+                            (the journal of :mod:`bench_sim.runtime.journal`)
 ``manifest.parquet``/``.csv`` one row per sample (complete, failed or pending)
 ``dataset.json``            the spec, provenance (version, config hashes), the schema
 ``README.md``               the dataset card; ``thumbnails.png`` its thumbnail sheet
@@ -39,6 +40,8 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError
 from bench_sim.io import OUTPUT_MARKER
+from bench_sim.pipeline import IMAGE_DIMS, STAGE_DIMS, pass_variables
+from bench_sim.runtime.journal import Journal
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -58,6 +61,7 @@ __all__ = [
     "DATASET_KIND",
     "STAGE_VARIABLES",
     "FUSED_VARIABLES",
+    "journal",
     "record_path",
     "read_info",
     "read_records",
@@ -77,17 +81,21 @@ COMPLETION_RECORD = OUTPUT_MARKER
 #: ``kind`` of ``dataset.json``: how a folder is recognised as a bench_sim dataset
 DATASET_KIND = "bench_sim dataset"
 
-#: variables with dimensions (sample, stage, line, column) -> dtype
-STAGE_VARIABLES: dict[str, str] = {
-    "dn": "uint32", "mean_dn": "float64", "photons": "float64", "reflectance": "float32", "clipped": "bool",
-}
+#: variables with dimensions (sample, stage, line, column) -> dtype (from
+#: :data:`bench_sim.pipeline.PASS_VARIABLES`, as are those below)
+STAGE_VARIABLES: dict[str, str] = {v.name: v.stored_dtype for v in pass_variables(STAGE_DIMS)}
 #: variables with dimensions (sample, line, column), present when two stages are fused -> dtype
-FUSED_VARIABLES: dict[str, str] = {"hdr": "float32", "hdr_source": "int16"}
+FUSED_VARIABLES: dict[str, str] = {v.name: v.stored_dtype for v in pass_variables(IMAGE_DIMS)}
+
+
+def journal(folder: str | Path) -> Journal:
+    """The journal of a dataset folder: ``samples/NNNNNNNN.json``, indexed by the record's ``sample``."""
+    return Journal(Path(folder) / RECORDS_DIR, key="sample", digits=8)
 
 
 def record_path(folder: str | Path, index: int) -> Path:
     """The completion record of sample ``index``."""
-    return Path(folder) / RECORDS_DIR / f"{int(index):08d}.json"
+    return journal(folder).path(index)
 
 
 def read_info(folder: str | Path) -> dict[str, Any]:
@@ -105,18 +113,9 @@ def read_info(folder: str | Path) -> dict[str, Any]:
 
 
 def read_records(folder: str | Path) -> dict[int, dict[str, Any]]:
-    """Sample index -> its record, for every readable record (complete or failed)."""
-    out: dict[int, dict[str, Any]] = {}
-    rec_dir = Path(folder) / RECORDS_DIR
-    if not rec_dir.is_dir():
-        return out
-    for path in sorted(rec_dir.glob("*.json")):
-        try:
-            rec = json.loads(path.read_text())
-            out[int(rec["sample"])] = rec
-        except (OSError, ValueError, KeyError, TypeError):
-            continue  # a torn or foreign file: the sample counts as not done
-    return out
+    """Sample index -> its record, for every readable record (complete or failed); an
+    unreadable one counts as not done (:mod:`bench_sim.runtime.journal`)."""
+    return journal(folder).read()
 
 
 def complete_samples(folder: str | Path) -> list[int]:
@@ -195,7 +194,7 @@ class Sample:
         The stored stages, in the order of the first axis of the stage arrays.
     arrays
         Variable -> numpy array: ``(stage, line, column)`` for ``dn``, ``mean_dn``, ``photons``,
-        ``reflectance``, ``clipped``; ``(line, column)`` for ``hdr``, ``hdr_source``.
+        ``reflectance``, ``clipped``; ``(line, column)`` for ``gamma_hdr``, ``gamma_hdr_source``.
     values
         The randomised config values (dotted keys; image paths relative to the spec).
     metrics
@@ -243,7 +242,7 @@ def iter_samples(
         raise BenchSimError(
             f"variables = {names}: {unknown[0]!r} is not in the dataset ({', '.join(schema)})"
         )
-    group = zarr.open_group(str(folder / DATA_STORE), mode="r")
+    group: Any = zarr.open_group(str(folder / DATA_STORE), mode="r")  # of arrays, by name
     records = read_records(folder)
     stages = tuple(int(m) for m in info["stages"])
     units = {v: schema[v]["units"] for v in names}

@@ -3,7 +3,7 @@ on Dask, resumable.
 
 A spec (:mod:`bench_sim.workflows.dataset.spec`) names a bench, a number of samples, a root
 seed, the stages to store, the output size and the config keys to randomise. Sample ``i`` is one
-:func:`bench_sim.workflows.simulate.run_pass` of its own bench (parameters drawn from its own
+:func:`bench_sim.pipeline.run_pass` of its own bench (parameters drawn from its own
 stream), with its own simulation stream: its content depends only on (spec, seed, ``i``), never
 on the number of workers or the order in which samples finish.
 
@@ -31,39 +31,45 @@ Steps of :func:`run_dataset`:
 from __future__ import annotations
 
 import contextlib
-import json
-import os
-import shutil
-import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bench_sim.config import BenchConfig
+from bench_sim.config import BenchConfig, config_sha256
 from bench_sim.errors import BenchSimError
+from bench_sim.io import check_free_space, format_bytes, write_json
+from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
+from bench_sim.pipeline import run_pass
+from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
+from bench_sim.runtime.progress import ProgressBar, progress_bar
+from bench_sim.sensor.model import stage_mean_var_dn
+from bench_sim.workflows.dataset.card import write_card
 from bench_sim.workflows.dataset.reader import (
     COMPLETION_RECORD,
     DATA_STORE,
-    DATASET_JSON,
-    DATASET_KIND,
     FUSED_VARIABLES,
-    MANIFEST_CSV,
-    MANIFEST_PARQUET,
-    RECORDS_DIR,
     STAGE_VARIABLES,
+    journal,
     read_records,
-    record_path,
 )
+from bench_sim.workflows.dataset.spec import DatasetSpec, check_sample_configs, load_spec, sample_streams
+from bench_sim.workflows.dataset.store import (
+    bytes_per_sample,
+    check_folder,
+    estimate_bytes,
+    lay_out,
+    manifest_frame,
+    manifest_meta,
+    write_manifest,
+)
+from bench_sim.workflows.preflight import preflight_tasks
 
 if TYPE_CHECKING:
-    import pandas as pd
     import xarray as xr
-
-    from bench_sim.workflows.dataset.spec import DatasetSpec
 
 __all__ = [
     "SampleTask",
@@ -77,12 +83,8 @@ __all__ = [
     "manifest_frame",
 ]
 
-#: Format of the dataset folder (``dataset.json``'s ``format``), raised on incompatible changes
-FORMAT_VERSION = 1
 #: Seconds between manifest rewrites during a run
 MANIFEST_EVERY_S = 10.0
-#: Bytes of a sample's record and manifest rows, and of the card, thumbnails and metadata
-RECORD_BYTES, FIXED_BYTES = 16 * 1024, 8 * 2**20
 
 
 @dataclass(frozen=True)
@@ -102,8 +104,9 @@ class SampleOutput:
     Attributes
     ----------
     arrays
-        Variable -> array: ``(stage, line, column)`` for :data:`~bench_sim.workflows.dataset.reader.STAGE_VARIABLES`,
-        ``(line, column)`` for :data:`~bench_sim.workflows.dataset.reader.FUSED_VARIABLES`.
+        Variable -> array: ``(stage, line, column)`` for
+        :data:`~bench_sim.workflows.dataset.reader.STAGE_VARIABLES`, ``(line, column)`` for
+        :data:`~bench_sim.workflows.dataset.reader.FUSED_VARIABLES`.
     metrics
         :func:`sample_metrics`.
     info
@@ -126,9 +129,6 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
     darkest and brightest tenth of the scene, clipped pixels left out, above the stage's dark
     level :func:`~bench_sim.sensor.model.stage_mean_var_dn` at 0 photons).
     """
-    from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
-    from bench_sim.sensor.model import stage_mean_var_dn
-
     photons0 = np.asarray(ds.photons.values[0])
     dark, bright = region_masks(photons0)
     out = {"scene_dr_db": scene_dynamic_range_db(photons0)}
@@ -146,9 +146,6 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
 
 def make_sample(task: SampleTask) -> SampleOutput:
     """Make one sample (runs in a worker): one pass with truth, its arrays and metrics."""
-    from bench_sim.config import config_sha256
-    from bench_sim.workflows.simulate import run_pass
-
     res = run_pass(task.config, task.stages, np.random.default_rng(task.stream), truth=True)
     ds = res.dataset
     arrays = {v: np.asarray(ds[v].values) for v in (*STAGE_VARIABLES, *FUSED_VARIABLES) if v in ds}
@@ -158,278 +155,6 @@ def make_sample(task: SampleTask) -> SampleOutput:
         "timings_s": {k: round(float(v), 4) for k, v in res.timings_s.items()},
     }
     return SampleOutput(task.index, arrays, sample_metrics(ds, task.config), info)
-
-
-def bytes_per_sample(stages: int, lines: int, columns: int, fused: bool) -> int:
-    """Uncompressed bytes of one sample's arrays: an upper bound of what it takes on disk."""
-    per_pixel = sum(np.dtype(d).itemsize for d in STAGE_VARIABLES.values()) * stages
-    if fused:
-        per_pixel += sum(np.dtype(d).itemsize for d in FUSED_VARIABLES.values())
-    return per_pixel * lines * columns
-
-
-def estimate_bytes(spec: DatasetSpec, samples: int | None = None) -> int:
-    """Upper bound of the bytes a dataset (or ``samples`` of its samples) writes: uncompressed
-    arrays, records and manifest rows, plus the card, thumbnails and metadata."""
-    n = spec.samples if samples is None else int(samples)
-    per = bytes_per_sample(len(spec.stages), spec.base.lines, spec.base.sensor.columns, spec.fused)
-    return n * (per + RECORD_BYTES) + FIXED_BYTES
-
-
-# --- the folder ----------------------------------------------------------------------------------
-
-
-def _folder_state(out: Path) -> str:
-    """``absent``, ``empty``, ``dataset`` (holds a bench_sim dataset.json), ``file`` or ``other``."""
-    if not out.exists():
-        return "absent"
-    if not out.is_dir():
-        return "file"
-    if not any(out.iterdir()):
-        return "empty"
-    try:
-        if json.loads((out / DATASET_JSON).read_text()).get("kind") == DATASET_KIND:
-            return "dataset"
-    except (OSError, ValueError, AttributeError):
-        pass
-    return "other"
-
-
-def _schema(spec: DatasetSpec) -> dict[str, Any]:
-    from bench_sim.workflows.simulate import VARIABLES
-
-    lines, cols, n_st = spec.base.lines, spec.base.sensor.columns, len(spec.stages)
-    variables: dict[str, Any] = {}
-    for name, dtype in STAGE_VARIABLES.items():
-        variables[name] = {
-            "dims": ["sample", "stage", "line", "column"], "dtype": dtype, "chunks": [1, 1, lines, cols],
-            "shape": [spec.samples, n_st, lines, cols],
-            "units": VARIABLES[name][0], "long_name": VARIABLES[name][1],
-        }
-    if spec.fused:
-        for name, dtype in FUSED_VARIABLES.items():
-            variables[name] = {
-                "dims": ["sample", "line", "column"], "dtype": dtype, "chunks": [1, lines, cols],
-                "shape": [spec.samples, lines, cols],
-                "units": VARIABLES[name][0], "long_name": VARIABLES[name][1],
-            }
-    return {"variables": variables, "store": DATA_STORE, "zarr_format": 3}
-
-
-def _info(spec: DatasetSpec) -> dict[str, Any]:
-    """The content of ``dataset.json``."""
-    from bench_sim.runtime.provenance import provenance
-
-    try:
-        spec_file = os.path.relpath(spec.path)
-    except ValueError:  # pragma: no cover - another drive
-        spec_file = str(spec.path)
-    if spec_file.startswith(".."):
-        spec_file = spec.path.name
-    return {
-        "kind": DATASET_KIND,
-        "format": FORMAT_VERSION,
-        "name": spec.name,
-        "description": spec.description,
-        "samples": spec.samples,
-        "seed": spec.seed,
-        "stages": list(spec.stages),
-        "lines": spec.base.lines,
-        "columns": spec.base.sensor.columns,
-        "fused": spec.fused,
-        "spec_file": spec_file,
-        "spec": spec.raw,
-        "spec_sha256": spec.identity(),
-        "randomize": {k: d.model_dump() for k, d in spec.randomize.items()},
-        "images": spec.images,
-        "streams": (
-            "sample i owns numpy.random.SeedSequence(seed, spawn_key=(i,)) = SeedSequence(seed).spawn(n)[i]; "
-            "its child 0 draws the randomised values (keys in sorted order), its child 1 drives the "
-            "simulation (render seed, target, fixed pattern, temporal noise)"
-        ),
-        "base": provenance(spec.base, spec.seed, kind="dataset base bench"),
-        "schema": _schema(spec),
-    }
-
-
-def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
-    """``dataset.json``, an empty ``data.zarr`` with the whole schema and ``samples/``."""
-    import warnings
-
-    import dask.array as da
-    import xarray as xr
-
-    from bench_sim.config import config_sha256, config_to_toml_text
-    from bench_sim.io import write_json
-    from bench_sim.version import __version__
-
-    info = _info(spec)
-    schema = info["schema"]["variables"]
-    coords = {
-        "sample": np.arange(spec.samples, dtype=np.int64),
-        "stage": np.asarray(spec.stages, dtype=np.int64),
-        "line": np.arange(spec.base.lines, dtype=np.int64),
-        "column": np.arange(spec.base.sensor.columns, dtype=np.int64),
-    }
-    data = {
-        name: (v["dims"], da.zeros(v["shape"], chunks=v["chunks"], dtype=v["dtype"]))
-        for name, v in schema.items()
-    }
-    ds = xr.Dataset(data, coords=coords)
-    for name, v in schema.items():
-        ds[name].attrs.update(units=v["units"], long_name=v["long_name"])
-    ds["sample"].attrs.update(units="1", long_name="sample index (spawn key of its random stream)")
-    ds["stage"].attrs.update(units="1", long_name="DTDI stage m (rows summed)")
-    ds["line"].attrs.update(units="1", long_name="scene line (material at line * delta along the track)")
-    ds["column"].attrs.update(units="1", long_name="sensor column")
-    ds.attrs.update(
-        title=f"bench_sim dataset {spec.name}",
-        seed=spec.seed,
-        version=__version__,
-        spec_sha256=info["spec_sha256"],
-        base_config=config_to_toml_text(spec.base),
-        base_config_sha256=config_sha256(spec.base),
-        beta_bits=int(spec.base.dtdi.beta_bits),
-        pedestal_dn=float(spec.base.dtdi.pedestal_dn),
-        complete_samples="see samples/*.json records (status complete) or the manifest",
-    )
-    if spec.fused:
-        ds.attrs.update(mu1=int(spec.base.fusion.mu1), mu2=int(spec.base.fusion.mu2))
-    encoding = {name: {"chunks": tuple(v["chunks"])} for name, v in schema.items()}
-    with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
-        warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
-        ds.to_zarr(folder / DATA_STORE, mode="w-", zarr_format=3, consolidated=True, compute=False,
-                   encoding=encoding)
-    (folder / RECORDS_DIR).mkdir()
-    write_json(folder / DATASET_JSON, info)
-
-
-def _lay_out(spec: DatasetSpec, out: Path) -> None:
-    """Make the skeleton in a temporary folder beside ``out`` and rename it into place (replacing
-    an empty folder or a dataset that may be replaced)."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
-    try:
-        _write_skeleton(spec, tmp)
-        os.chmod(tmp, 0o777 & ~_umask())
-        old = None
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
-            os.replace(out, old / "set")
-        os.replace(tmp, out)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def _check_folder(spec: DatasetSpec, out: Path, *, reuse: bool) -> str:
-    """Decide what to do with ``out`` before anything runs: ``create`` (lay out a new dataset,
-    replacing an empty folder or a replaceable dataset) or ``reuse`` (the same dataset)."""
-    from bench_sim.io import check_output_dir
-    from bench_sim.version import __version__
-
-    state = _folder_state(out)
-    if state == "file":
-        raise BenchSimError(f"--out = {str(out)!r}: is a file, not a folder")
-    if state == "other":
-        raise BenchSimError(
-            f"--out = {str(out)!r}: folder exists, is not empty and holds no bench_sim dataset: choose "
-            "a new or empty folder"
-        )
-    if state in ("absent", "empty"):
-        check_output_dir(out)
-        return "create"
-    info = json.loads((out / DATASET_JSON).read_text())
-    records = read_records(out)
-    has_data = (out / DATA_STORE).is_dir()
-    done = sum(1 for r in records.values() if r.get("status") == "complete")
-    if not reuse:
-        if (out / COMPLETION_RECORD).is_file() or not records or not has_data:
-            return "create"  # a complete dataset, or one with no sample yet, is replaced
-        raise BenchSimError(
-            f"--out = {str(out)!r}: holds an incomplete dataset ({done} of {info.get('samples')} samples "
-            "complete): --resume completes it; delete the folder to start again"
-        )
-    if not has_data:
-        return "create"  # a card without its data (e.g. a committed example): make the data
-    if info.get("spec_sha256") != spec.identity():
-        raise BenchSimError(
-            f"--out = {str(out)!r}: holds a dataset made from another spec (spec, base bench or image "
-            "files changed): use a new folder, or run without --resume to replace a complete one"
-        )
-    made_with = info.get("base", {}).get("version")
-    if made_with != __version__:
-        raise BenchSimError(
-            f"--out = {str(out)!r}: made with bench_sim {made_with}, this is {__version__}: samples would "
-            "not match; use a new folder"
-        )
-    return "reuse"
-
-
-# --- manifest ------------------------------------------------------------------------------------
-
-
-def manifest_frame(
-    spec: DatasetSpec, records: dict[int, dict[str, Any]], values: Sequence[dict[str, Any]]
-) -> pd.DataFrame:
-    """One row per sample: ``sample``, ``seed``, every randomised key, ``config_sha256``, the
-    summary metrics, ``status`` (``complete`` / ``failed`` / ``pending``), ``error``, ``wall_s``,
-    ``worker``. ``values``: every sample's drawn values (pending samples list theirs)."""
-    import pandas as pd
-
-    metric_names: list[str] = ["scene_dr_db"]
-    for m in spec.stages:
-        metric_names += [f"saturated_fraction_m{m}", f"snr_dark_m{m}", f"snr_bright_m{m}"]
-    rows = []
-    for i in range(spec.samples):
-        rec = records.get(i, {})
-        drawn = rec.get("values") or values[i]
-        metrics = rec.get("metrics") or {}
-        row: dict[str, Any] = {"sample": i, "seed": spec.seed}
-        row.update({k: drawn.get(k) for k in spec.randomize})
-        row["config_sha256"] = rec.get("config_sha256", "")
-        row.update({k: float(metrics.get(k, np.nan)) for k in metric_names})
-        row.update(
-            status=rec.get("status", "pending"), error=rec.get("error") or "",
-            wall_s=float(rec.get("wall_s", np.nan)), worker=rec.get("worker", ""),
-        )
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
-def _write_manifest(
-    out: Path, spec: DatasetSpec, meta: dict[str, Any], values: Sequence[dict[str, Any]]
-) -> pd.DataFrame:
-    """``manifest.parquet`` (provenance in the schema metadata, key ``bench_sim``) and
-    ``manifest.csv`` (provenance as ``#`` lines), both rebuilt from the records."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    from bench_sim.io import atomic_path, write_csv
-
-    df = manifest_frame(spec, read_records(out), values)
-    table = pa.Table.from_pandas(df, preserve_index=False)
-    provenance = json.dumps(meta, sort_keys=True, default=str).encode()
-    table = table.replace_schema_metadata({**(table.schema.metadata or {}), b"bench_sim": provenance})
-    with atomic_path(out / MANIFEST_PARQUET) as tmp:
-        pq.write_table(table, tmp)
-    rows = [[_csv_value(v) for v in r] for r in df.itertuples(index=False, name=None)]
-    write_csv(out / MANIFEST_CSV, list(df.columns), rows, metadata=meta)
-    return df
-
-
-def _csv_value(v: Any) -> Any:
-    if isinstance(v, np.generic):
-        v = v.item()
-    return v
 
 
 # --- the run -------------------------------------------------------------------------------------
@@ -467,6 +192,19 @@ class DatasetRun:
         return self.complete == self.samples
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """A checked run: the spec, the folder, what to do with it, the samples to make."""
+
+    spec: DatasetSpec
+    out: Path
+    action: str
+    done_before: set[int]
+    todo: list[int]
+    values: list[dict[str, Any]]
+    planned: dict[int, BenchConfig]
+
+
 def _parse_only(only: Sequence[int] | None, samples: int) -> list[int] | None:
     if only is None:
         return None
@@ -477,6 +215,63 @@ def _parse_only(only: Sequence[int] | None, samples: int) -> list[int] | None:
     if bad:
         raise BenchSimError(f"--only = {bad[0]}: outside 0..{samples - 1} (samples = {samples})")
     return out
+
+
+def _check_options(
+    workers: int | None, scheduler: str | None, resume: bool, only: Sequence[int] | None
+) -> None:
+    if workers is not None and scheduler is not None:
+        raise BenchSimError("--workers and --scheduler: give one (a scheduler brings its own workers)")
+    if workers is not None and workers < 0:
+        raise BenchSimError(f"--workers = {workers}: must be >= 0 (0 runs in this process)")
+    if resume and only:
+        raise BenchSimError("--resume and --only: give one (--only remakes just the samples named)")
+
+
+def _plan(
+    spec_path: str | Path, out: str | Path, workers: int | None, scheduler: str | None, resume: bool,
+    only: Sequence[int] | None,
+) -> _Plan:
+    """Every check before anything is written: the spec, the folder, the disk, every sample's
+    bench, memory and backend (one line on the first problem)."""
+    spec = load_spec(spec_path)
+    only_idx = _parse_only(only, spec.samples)
+    out = Path(out).expanduser().resolve()
+    action = check_folder(spec, out, reuse=resume or only_idx is not None)
+    done_before = set() if action == "create" else {
+        i for i, r in read_records(out).items() if r.get("status") == "complete"
+    }
+    todo = only_idx if only_idx is not None else [i for i in range(spec.samples) if i not in done_before]
+    per = bytes_per_sample(len(spec.stages), spec.base.lines, spec.base.sensor.columns, spec.fused)
+    check_free_space(
+        out, estimate_bytes(spec, len(todo)),
+        detail=f"{len(todo)} samples x {format_bytes(per)} uncompressed + records and card",
+    )
+    values = [spec.draw(i) for i in range(spec.samples)]
+    planned = check_sample_configs(spec, {i: values[i] for i in todo})
+    preflight_tasks(  # memory of the samples running at once here, the backend (disk: above)
+        "dataset", [(planned[i], spec.stages) for i in todo], out=out, workers=workers,
+        scheduler=scheduler, disk_bytes={}, hint="lower --workers, lines or columns",
+    )
+    return _Plan(spec, out, action, done_before, todo, values, planned)
+
+
+def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool) -> _SampleWriter:
+    """Make the samples to do, writing each as it completes; the manifest of what is on disk
+    is written if the run stops (Ctrl-C, a lost scheduler)."""
+    spec, todo = plan.spec, plan.todo
+    tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1]) for i in todo]
+    skipped = spec.samples - len(todo)
+    note = f"({skipped} already complete)" if skipped else ""
+    with progress_bar("dataset", len(todo), "samples", enabled=progress, note=note) as bar:
+        writer = _SampleWriter(plan.out, spec, plan.values, meta, bar)
+        try:
+            run_tasks(make_sample, tasks, client=client, indices=todo, keep_values=False,
+                      on_result=writer.write)
+        except BaseException:
+            write_manifest(plan.out, spec, meta, plan.values)  # what is on disk now
+            raise
+    return writer
 
 
 def run_dataset(
@@ -511,66 +306,26 @@ def run_dataset(
     command
         The command line, for the dataset card.
     """
-    from bench_sim.io import check_free_space, format_bytes, write_json
-    from bench_sim.runtime.execution import open_client, run_tasks
-    from bench_sim.workflows.dataset.card import write_card
-    from bench_sim.workflows.dataset.spec import check_sample_configs, load_spec, sample_streams
-    from bench_sim.workflows.preflight import preflight_tasks
-
     t_start = time.perf_counter()
-    if workers is not None and scheduler is not None:
-        raise BenchSimError("--workers and --scheduler: give one (a scheduler brings its own workers)")
-    if workers is not None and workers < 0:
-        raise BenchSimError(f"--workers = {workers}: must be >= 0 (0 runs in this process)")
-    if resume and only:
-        raise BenchSimError("--resume and --only: give one (--only remakes just the samples named)")
-    spec = load_spec(spec_path)
-    only_idx = _parse_only(only, spec.samples)
-    out = Path(out).expanduser().resolve()
-    action = _check_folder(spec, out, reuse=resume or only_idx is not None)
-    done_before = set() if action == "create" else {
-        i for i, r in read_records(out).items() if r.get("status") == "complete"
-    }
-    todo = only_idx if only_idx is not None else [i for i in range(spec.samples) if i not in done_before]
-    per = bytes_per_sample(len(spec.stages), spec.base.lines, spec.base.sensor.columns, spec.fused)
-    check_free_space(
-        out, estimate_bytes(spec, len(todo)),
-        detail=f"{len(todo)} samples x {format_bytes(per)} uncompressed + records and card",
-    )
-    values = [spec.draw(i) for i in range(spec.samples)]
-    planned = check_sample_configs(spec, {i: values[i] for i in todo})
-    preflight_tasks(  # memory of the samples running at once here, the backend (disk: above)
-        "dataset", [(planned[i], spec.stages) for i in todo], out=out, workers=workers,
-        scheduler=scheduler, disk_bytes={}, hint="lower --workers, lines or columns",
-    )
+    _check_options(workers, scheduler, resume, only)
+    plan = _plan(spec_path, out, workers, scheduler, resume, only)
+    spec, out = plan.spec, plan.out
     run = DatasetRun(out=out, samples=spec.samples)
-
     # the execution layer first: a scheduler that cannot be reached (or a cluster that cannot
     # start) is refused before anything is laid out at --out
-    with open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext() as client:
-        if action == "create":
-            _lay_out(spec, out)
-        meta = _manifest_meta(spec)
+    cluster = open_client(workers=workers, scheduler=scheduler) if plan.todo else contextlib.nullcontext()
+    with cluster as client:
+        if plan.action == "create":
+            lay_out(spec, out)
+        meta = manifest_meta(spec)
         (out / COMPLETION_RECORD).unlink(missing_ok=True)  # rewritten last if the dataset completes
-        if not todo:
-            run.complete = len(done_before)
+        if not plan.todo:
+            run.complete = len(plan.done_before)
         else:
-            tasks = [
-                SampleTask(i, planned[i], spec.stages, sample_streams(spec.seed, i)[1]) for i in todo
-            ]
-            writer = _SampleWriter(out, spec, values, meta)
-            bar = _progress(progress, len(todo), spec.samples - len(todo))
-            try:
-                run_tasks(make_sample, tasks, client=client, indices=todo, keep_values=False,
-                          on_result=lambda o: (writer.write(o), bar(o)))
-            except BaseException:
-                _write_manifest(out, spec, meta, values)  # what is on disk now (Ctrl-C, lost scheduler)
-                raise
-            finally:
-                bar(None)
+            writer = _run_samples(plan, client, meta, progress)
             run.ran, run.failed = writer.ran, writer.failed
             run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
-    df = _write_manifest(out, spec, meta, values)
+    df = write_manifest(out, spec, meta, plan.values)
     write_card(out, spec, df, command=command, provenance=meta)
     if run.complete == spec.samples:
         write_json(out / COMPLETION_RECORD, {
@@ -581,35 +336,27 @@ def run_dataset(
     return run
 
 
-def _manifest_meta(spec: DatasetSpec) -> dict[str, Any]:
-    from bench_sim.config import config_sha256
-    from bench_sim.version import __version__
-
-    return {
-        "version": __version__, "seed": spec.seed, "config_sha256": config_sha256(spec.base),
-        "spec_sha256": spec.identity(), "dataset": spec.name,
-    }
-
-
 class _SampleWriter:
-    """Writes each outcome as it arrives: arrays into ``data.zarr``, then the record; the
-    manifest every :data:`MANIFEST_EVERY_S` seconds."""
+    """Writes each outcome as it arrives: arrays into ``data.zarr``, then the record (the
+    journal, :mod:`bench_sim.runtime.journal`); the manifest every :data:`MANIFEST_EVERY_S`
+    seconds; advances the progress bar."""
 
-    def __init__(self, out: Path, spec: DatasetSpec, values: Sequence[dict[str, Any]], meta: dict[str, Any]):
+    def __init__(self, out: Path, spec: DatasetSpec, values: Sequence[dict[str, Any]], meta: dict[str, Any],
+                 bar: ProgressBar):
         import zarr
 
-        self.out, self.spec, self.values, self.meta = out, spec, values, meta
-        self.group = zarr.open_group(str(out / DATA_STORE), mode="r+", use_consolidated=False)
+        self.out, self.spec, self.values, self.meta, self.bar = out, spec, values, meta, bar
+        # a group of arrays, by name
+        self.group: Any = zarr.open_group(str(out / DATA_STORE), mode="r+", use_consolidated=False)
+        self.journal = journal(out)
         self.ran: list[int] = []
         self.failed: dict[int, str] = {}
         self._last_manifest = time.monotonic()
 
-    def write(self, outcome: Any) -> None:
-        from bench_sim.io import write_json
-
+    def write(self, outcome: TaskOutcome) -> None:
         i = int(outcome.index)
-        path = record_path(self.out, i)
-        path.unlink(missing_ok=True)  # --only on a complete sample: not complete while rewritten
+        # --only on a complete sample: not complete while it is rewritten
+        self.journal.path(i).unlink(missing_ok=True)
         rec: dict[str, Any] = {
             "sample": i, "seed": self.spec.seed, "values": self.values[i],
             "wall_s": round(float(outcome.wall_s), 4), "worker": str(outcome.worker),
@@ -622,39 +369,13 @@ class _SampleWriter:
         else:
             rec.update(status="failed", error=outcome.error)
             self.failed[i] = str(outcome.error)
-        write_json(path, rec)  # after the arrays: a record says they are on disk
+            self.bar.note(f"{len(self.failed)} failed")
+        self.journal.write(rec)  # after the arrays: a record says they are on disk
         self.ran.append(i)
+        self.bar.advance()
         if time.monotonic() - self._last_manifest > MANIFEST_EVERY_S:
-            _write_manifest(self.out, self.spec, self.meta, self.values)
+            write_manifest(self.out, self.spec, self.meta, self.values)
             self._last_manifest = time.monotonic()
-
-
-def _progress(enabled: bool, total: int, skipped: int) -> Callable[[Any], None]:
-    """A callback advancing a rich progress bar per outcome (``None`` closes it)."""
-    if not enabled:
-        return lambda outcome: None
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-    bar = Progress(
-        TextColumn("[bold]dataset"), BarColumn(), TextColumn("{task.completed}/{task.total} samples"),
-        TextColumn("{task.fields[note]}"), TimeElapsedColumn(), TimeRemainingColumn(), transient=False,
-        console=None,
-    )
-    note = f"({skipped} already complete)" if skipped else ""
-    task = bar.add_task("samples", total=total, note=note)
-    bar.start()
-    failed = [0]
-
-    def step(outcome: Any) -> None:
-        if outcome is None:
-            bar.stop()
-            return
-        if not outcome.ok:
-            failed[0] += 1
-            bar.update(task, note=f"{failed[0]} failed")
-        bar.update(task, advance=1)
-
-    return step
 
 
 def main_summary(run: DatasetRun) -> str:
@@ -665,4 +386,3 @@ def main_summary(run: DatasetRun) -> str:
         f"dataset {run.out}: {run.complete} of {run.samples} samples complete ({state}); "
         f"{len(run.ran)} made in {run.wall_s:.1f} s{failed}"
     )
-

@@ -49,19 +49,29 @@ import glob as _glob
 import hashlib
 import json
 import math
-import tomllib
+import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from bench_sim.config import DEFAULT_CONFIG_PATH, BenchConfig, load_config, with_overrides
+from bench_sim.config import (
+    DEFAULT_CONFIG_PATH,
+    BenchConfig,
+    config_sha256,
+    load_config,
+    read_toml,
+    validate_model,
+    with_overrides,
+)
 from bench_sim.errors import BenchSimError
 from bench_sim.io import sha256_file
+from bench_sim.pipeline import check_stages
 from bench_sim.runtime.execution import task_seed_sequence
+from bench_sim.workflows.simulate import check_inputs
 
 __all__ = [
     "DISTRIBUTIONS",
@@ -259,23 +269,6 @@ class _SpecFile(_Strict):
     randomize: dict[str, Any] = {}
 
 
-def _pydantic_line(exc: ValidationError, prefix: str) -> str:
-    """The first error of ``exc`` as ``prefix.key = value: message``."""
-    err = exc.errors(include_url=False)[0]
-    loc = ".".join(str(p) for p in err.get("loc", ()) if not str(p).startswith("function-"))
-    key = ".".join(p for p in (prefix, loc) if p)
-    msg = str(err.get("msg", "invalid")).removeprefix("Value error, ")
-    if err.get("type") == "extra_forbidden":
-        return f"unknown key '{key}'"
-    if err.get("type") == "missing":
-        return f"{key}: missing (required)"
-    if msg.split(" = ")[0].isidentifier() and " = " in msg:  # our validators name the field
-        return f"{prefix}: {msg}" if prefix else msg
-    value = err.get("input")
-    shown = "" if isinstance(value, dict) else f" = {value!r}"
-    return f"{key}{shown}: {msg}"
-
-
 def nested(dotted: Mapping[str, Any]) -> dict[str, Any]:
     """``{"a.b.c": v}`` -> ``{"a": {"b": {"c": v}}}`` (overrides for
     :func:`bench_sim.config.with_overrides`)."""
@@ -349,14 +342,12 @@ class DatasetSpec:
 
     @property
     def fused(self) -> bool:
-        """Whether every sample carries ``hdr`` (both fusion stages are stored)."""
+        """Whether every sample carries ``gamma_hdr`` (both fusion stages are stored)."""
         return self.base.fusion.mu1 in self.stages and self.base.fusion.mu2 in self.stages
 
     def identity(self) -> str:
         """SHA-256 of what fixes the dataset's content: the spec as parsed, the resolved base
         bench and the image files' contents (a resumed run must match it)."""
-        from bench_sim.config import config_sha256
-
         blob = {"spec": self.raw, "base_config_sha256": config_sha256(self.base), "images": self.images}
         return hashlib.sha256(json.dumps(blob, sort_keys=True, default=str).encode()).hexdigest()
 
@@ -380,16 +371,6 @@ class DatasetSpec:
         return with_overrides(self.base, self.overrides(values), source=where)
 
 
-def _read_spec_toml(path: Path) -> dict[str, Any]:
-    if not path.is_file():
-        raise BenchSimError(f"dataset spec {str(path)!r}: no such file")
-    try:
-        return tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        first = str(exc).splitlines()[0]
-        raise BenchSimError(f"dataset spec {str(path)!r}: not valid TOML ({first})") from None
-
-
 def _resolve_glob(path: Path, key: str, dist: Glob) -> Glob:
     pattern = Path(dist.pattern)
     full = str(pattern if pattern.is_absolute() else path.parent / pattern)
@@ -398,8 +379,6 @@ def _resolve_glob(path: Path, key: str, dist: Glob) -> Glob:
         raise BenchSimError(
             f"{path}: randomize.{key}.pattern = {dist.pattern!r}: matches no file (relative to {path.parent})"
         )
-    import os
-
     rel = tuple(h if pattern.is_absolute() else os.path.relpath(h, path.parent) for h in hits)
     return dist.model_copy(update={"files": rel})
 
@@ -426,10 +405,8 @@ def _parse_distributions(path: Path, table: Mapping[str, Any]) -> dict[str, Any]
             raise BenchSimError(f"{path}: randomize.{key}: dist = 'glob' is for target.image only")
         if "files" in entry and entry["dist"] == "glob":
             raise BenchSimError(f"{path}: unknown key 'randomize.{key}.files'")
-        try:
-            dist = model.model_validate(entry)
-        except ValidationError as exc:
-            raise BenchSimError(f"{path}: {_pydantic_line(exc, f'randomize.{key}')}") from None
+        allowed = ", ".join(f for f in model.model_fields if f != "files")
+        dist = validate_model(model, entry, str(path), f"randomize.{key}", f"allowed: {allowed}")
         if isinstance(dist, Glob):
             dist = _resolve_glob(path, key, dist)
         out[key] = dist
@@ -456,14 +433,9 @@ def _check_keys_and_extremes(spec: DatasetSpec, fixed_keys: Iterable[str]) -> No
 def load_spec(path: str | Path) -> DatasetSpec:
     """Load and check a dataset spec (see the module docstring); one-line :class:`BenchSimError`
     naming the file, the key, the value and what is allowed."""
-    from bench_sim.workflows.simulate import check_stages
-
     path = Path(path).expanduser().resolve()
-    raw = _read_spec_toml(path)
-    try:
-        top = _SpecFile.model_validate(raw)
-    except ValidationError as exc:
-        raise BenchSimError(f"{path}: {_pydantic_line(exc, '')}") from None
+    raw = read_toml(path, f"dataset spec {str(path)!r}", "a dataset spec")
+    top = validate_model(_SpecFile, raw, str(path), unknown=f"allowed: {', '.join(_SpecFile.model_fields)}")
     base_path = DEFAULT_CONFIG_PATH if top.base is None else (path.parent / top.base).resolve()
     if top.base is not None and not base_path.is_file():
         raise BenchSimError(f"{path}: base = {top.base!r}: no such config file ({base_path})")
@@ -503,8 +475,6 @@ def check_sample_configs(
     """Validate the benches of samples drawn as ``values`` (index -> :meth:`DatasetSpec.draw`):
     index -> config; every target image a sample reads is checked once (one-line errors naming
     the sample or the file)."""
-    from bench_sim.workflows.simulate import check_inputs
-
     out: dict[int, BenchConfig] = {}
     seen: set[Any] = set()
     for i, vals in values.items():

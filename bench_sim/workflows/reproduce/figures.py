@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from bench_sim.io import write_figure_png, write_png
+from bench_sim.rig.target_sources import area_resize
 
 __all__ = [
     "stage_display", "fig3_stages", "fig4_hdr", "snr_versus_signal_figure", "Box", "import_in_background"
@@ -66,8 +67,6 @@ def fig3_stages(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    from bench_sim.rig.target_sources import area_resize
 
     n = len(order)
     cols = 5
@@ -128,8 +127,6 @@ def fig4_hdr(
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
-    from bench_sim.rig.target_sources import area_resize
-
     fig = plt.figure(figsize=(11, 9.4), dpi=110)
     # fixed margins (no layout engine: it costs more than drawing)
     grid = fig.add_gridspec(
@@ -144,15 +141,15 @@ def fig4_hdr(
         # area-averaged to the axes' pixels (the figure then hardly resamples); extent keeps the
         # full-resolution coordinates for the inset frames
         h, w = img.shape
-        box = ax.get_window_extent()
-        scale = min(box.width / w, box.height / h)
+        extent = ax.get_window_extent()
+        scale = min(extent.width / w, extent.height / h)
         shown = area_resize(img, max(1, round(h * scale)), max(1, round(w * scale))) if scale < 1 else img
         ax.imshow(shown.astype(np.float32), cmap="gray", vmin=0, vmax=1,
                   extent=(-0.5, w - 0.5, h - 0.5, -0.5))
         ax.set_title(title, fontsize=10, y=1.0)
         ax.set_axis_off()
-        for box, colour in ((dark_box, "tab:cyan"), (bright_box, "tab:orange")):
-            l0, l1, c0, c1 = box
+        for frame, colour in ((dark_box, "tab:cyan"), (bright_box, "tab:orange")):
+            l0, l1, c0, c1 = frame
             ax.add_patch(Rectangle((c0, l0), c1 - c0, l1 - l0, fill=False, ec=colour, lw=1.5))
     titles = list(inset_titles) if inset_titles is not None else [
         "dark, $\\Gamma_1$", "dark, $\\Gamma_{TRA}$", "bright, $\\Gamma_2$", "bright, $\\Gamma_{TRA}$"
@@ -215,14 +212,14 @@ def snr_versus_signal_figure(
 
     p = np.asarray(photons, dtype=np.float64)
     fig, ax = plt.subplots(figsize=(7.2, 4.6), dpi=110)
-    colours = {"gamma1": "tab:blue", "gamma2": "tab:orange", "hdr": "0.35"}
+    colours = {"gamma1": "tab:blue", "gamma2": "tab:orange", "gamma_hdr": "0.35"}
     for name, values in snr.items():
         y = np.asarray(values, dtype=np.float64)
         sat = photons_sat.get(name)
         # up to the saturation point: beyond it the clipped images have no temporal noise left
         ok = (p > 0) & np.isfinite(y) & (y > 0) & (p <= (sat if sat and np.isfinite(sat) else np.inf))
         c = colours.get(name)
-        wide = name == "hdr"  # drawn wide underneath: it follows Gamma2, then the scaled Gamma1
+        wide = name == "gamma_hdr"  # drawn wide underneath: it follows Gamma2, then the scaled Gamma1
         ax.plot(p[ok], y[ok], "-", lw=5 if wide else 1.5, alpha=0.45 if wide else 1.0, color=c,
                 zorder=1 if wide else 3, label=labels.get(name, name))
         for x, mk in ((photons_min.get(name), "o"), (photons_sat.get(name), "s")):

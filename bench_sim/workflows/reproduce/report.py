@@ -1,20 +1,23 @@
-"""``report.md`` of the reproduction: paper and simulation side by side, and the paper's two
-inconsistencies stated plainly with what the simulation measures.
+"""``report.md`` and ``table1.csv`` of the reproduction: paper and simulation side by side, and
+the paper's two inconsistencies stated plainly with what the simulation measures.
 
-Every number, stage pair and verdict in the report comes from the run's ``metrics.json`` dict;
-the only fixed numbers are the paper's own (its Table 1 and its 26.02 dB), quoted as such.
+Every number, stage pair and verdict in the report comes from the run's
+:class:`~bench_sim.workflows.reproduce.result.ReproduceResult` (what ``metrics.json`` holds); the
+only fixed numbers are the paper's own (its Table 1 and its 26.02 dB), quoted as such.
 """
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 from pathlib import Path
-from typing import Any
 
 from bench_sim.config import BenchConfig
-from bench_sim.io import write_text
+from bench_sim.io import atomic_path, markdown_table, write_text
+from bench_sim.workflows.reproduce.result import PAPER, ReproduceResult
 
-__all__ = ["write_report", "report_markdown", "AGREE_DB"]
+__all__ = ["write_report", "report_markdown", "write_table1", "AGREE_DB"]
 
 #: Two dynamic-range figures "agree" when they differ by at most this much [dB] (the scatter of
 #: the measured saturation points is a few tenths of a dB).
@@ -40,22 +43,11 @@ def _clip_cause(clips_on_word: bool, beta: int) -> str:
     return f"the {beta}-bit output word" if clips_on_word else "the pixel (full well / ADC top)"
 
 
-def _dr_section(m: dict[str, Any]) -> list[str]:
-    """The headline: DRs, the gain over Gamma1 first, then over Gamma2 and what it means."""
-    mu1, mu2, beta = m["mu1"], m["mu2"], m["beta"]
-    dr, ext, model = m["dr_db"], m["dr_db_extrapolated"], m["dr_db_model"]
-    g1, g2 = m["delta_dr_db_vs_gamma1"], m["delta_dr_db_vs_gamma2"]
-    g2x = m["delta_dr_db_vs_gamma2_extrapolated"]
-    eq15 = m["delta_psi_db_eq15"]
-    clips = m["stage_clips_on_word"]
-    # eq. 15 is a ratio of clip points: judged on the extrapolated saturation points, free of the
-    # scatter of the variance maxima
-    gain2 = (
-        f"Gain over Gamma2: {g2:.2f} dB ({g2x:.2f} dB with the extrapolated saturation points), "
-        f"against eq. 15's 20 lg({mu2}/{mu1}) = {eq15:.2f} dB"
-    )
-    model_g1 = model["gamma_hdr"] - model["gamma1"]
-    lines = [
+def _dr_table(r: ReproduceResult) -> list[str]:
+    """The DR section's introduction and table."""
+    sh, d = r.shape, r.dynamic_range
+    dr, ext, model, clips = d.dr_db, d.dr_db_extrapolated, d.dr_db_model, d.stage_clips_on_word
+    return [
         "## Dynamic range: what fusing the two stages gains",
         "",
         "Measured EMVA 1288 style through the whole chain (a photon-transfer series of uniform "
@@ -64,21 +56,43 @@ def _dr_section(m: dict[str, Any]) -> list[str]:
         "temporal variance; the point where the linear response meets the clipped plateau is "
         "given too, labelled *extrapolated*.",
         "",
-        f"| | Gamma1 (m = {mu1}) | Gamma2 (m = {mu2}) | Gamma_HDR |",
-        "|---|---:|---:|---:|",
-        "| **DR, EMVA 1288 saturation** | " + " | ".join(f"**{dr[k]:.2f} dB**" for k in _NAMES) + " |",
-        "| DR, extrapolated saturation | " + " | ".join(f"{ext[k]:.2f} dB" for k in _NAMES) + " |",
-        "| DR, sensor model (closed form) | " + " | ".join(f"{model[k]:.2f} dB" for k in _NAMES) + " |",
-        f"| the stage clips on | {_clip_cause(clips['gamma1'], beta)} | "
-        f"{_clip_cause(clips['gamma2'], beta)} | |",
+        *markdown_table(
+            ["", f"Gamma1 (m = {sh.mu1})", f"Gamma2 (m = {sh.mu2})", "Gamma_HDR"],
+            [
+                ["**DR, EMVA 1288 saturation**", *(f"**{dr[k]:.2f} dB**" for k in _NAMES)],
+                ["DR, extrapolated saturation", *(f"{ext[k]:.2f} dB" for k in _NAMES)],
+                ["DR, sensor model (closed form)", *(f"{model[k]:.2f} dB" for k in _NAMES)],
+                ["the stage clips on", _clip_cause(clips["gamma1"], sh.beta),
+                 _clip_cause(clips["gamma2"], sh.beta), ""],
+            ],
+            "lrrr",
+            compact_empty=True,
+        ),
         "",
-        f"- **Gain over the better input, Gamma1: {g1:.2f} dB** (sensor model: {model_g1:.2f} dB). "
+    ]
+
+
+def _dr_gains(r: ReproduceResult) -> list[str]:
+    """The gains over Gamma1 and Gamma2 and what they mean."""
+    mu1, mu2, beta = r.shape.mu1, r.shape.mu2, r.shape.beta
+    d = r.dynamic_range
+    g2x, eq15, clips = d.delta_dr_db_vs_gamma2_extrapolated, d.delta_psi_db_eq15, d.stage_clips_on_word
+    # eq. 15 is a ratio of clip points: judged on the extrapolated saturation points, free of the
+    # scatter of the variance maxima
+    gain2 = (
+        f"Gain over Gamma2: {d.delta_dr_db_vs_gamma2:.2f} dB ({g2x:.2f} dB with the extrapolated "
+        f"saturation points), against eq. 15's 20 lg({mu2}/{mu1}) = {eq15:.2f} dB"
+    )
+    model_g1 = d.dr_db_model["gamma_hdr"] - d.dr_db_model["gamma1"]
+    lines = [
+        f"- **Gain over the better input, Gamma1: {d.delta_dr_db_vs_gamma1:.2f} dB** (sensor model: "
+        f"{model_g1:.2f} dB). "
         f"Gamma_HDR keeps Gamma1's saturation end and takes the dark end from stage {mu2}; each row "
         f"is read and digitised on its own, so read noise adds up as sqrt(m) in the digital sum and "
         f"the noise floor drops by about sqrt({mu2}/{mu1}), i.e. about 10 lg({mu2}/{mu1}) = "
         f"{10 * math.log10(mu2 / mu1):.2f} dB, not 20 lg.",
     ]
-    if m["gain_over_gamma2_by_construction"]:
+    if d.gain_over_gamma2_by_construction:
         lines.append(
             f"- {gain2} ({'agrees' if _agrees(g2x, eq15) else '**differs**'}; the variance maxima "
             "scatter by a few tenths of a dB). Here both stages clip on the "
@@ -95,12 +109,18 @@ def _dr_section(m: dict[str, Any]) -> list[str]:
             f"{_clip_cause(clips['gamma1'], beta)} and stage {mu2} on "
             f"{_clip_cause(clips['gamma2'], beta)}, so the saturation points are not mu2/mu1 apart."
         )
-    sw = m["fusion_switch"]
+    return lines
+
+
+def _dr_section(r: ReproduceResult) -> list[str]:
+    """The headline: DRs, the gain over Gamma1 first, then over Gamma2 and what it means."""
+    lines = _dr_table(r) + _dr_gains(r)
+    sw = r.dynamic_range.fusion_switch
     if math.isfinite(sw["snr_below"]) and math.isfinite(sw["snr_above"]):
         lines.append(
-            f"- At the fusion switch (Gamma_HDR = {sw['threshold_dn']:.0f} DN in stage-{mu2} units, "
-            f"about {sw['photons']:.4g} photons per pixel per frame) the SNR of Gamma_HDR drops from "
-            f"{sw['snr_below']:.1f} (Gamma2, at {sw['photons_below']:.4g} photons) to "
+            f"- At the fusion switch (Gamma_HDR = {sw['threshold_dn']:.0f} DN in stage-{r.shape.mu2} "
+            f"units, about {sw['photons']:.4g} photons per pixel per frame) the SNR of Gamma_HDR drops "
+            f"from {sw['snr_below']:.1f} (Gamma2, at {sw['photons_below']:.4g} photons) to "
             f"{sw['snr_above']:.1f} (scaled Gamma1, at {sw['photons_above']:.4g} photons): see the "
             "figure."
         )
@@ -108,25 +128,22 @@ def _dr_section(m: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _inconsistencies(m: dict[str, Any]) -> list[str]:
-    mu1, mu2 = m["mu1"], m["mu2"]
-    om, op = m["omega"], m["omega_paper"]
-    g2, eq15, paper_db = m["delta_dr_db_vs_gamma2"], m["delta_psi_db_eq15"], m["paper_delta_psi_db"]
-    g2x = m["delta_dr_db_vs_gamma2_extrapolated"]  # clip points: what eq. 15 compares
-    pairs = ", ".join(f"({a}, {b})" for a, b in m["stage_pairs_26_02_db"]) or "none"
-    paper_eq18 = op["gamma_hdr"] < min(op["gamma1"], op["gamma2"])
-    names = {"gamma1": "Gamma1", "gamma2": "Gamma2", "gamma_hdr": "Gamma_HDR"}
-    dr = m["dr_db"]
-    ranking = " > ".join(names[k] for k in sorted(dr, key=dr.__getitem__, reverse=True))
+def _eq15_inconsistency(r: ReproduceResult) -> str:
+    """The first inconsistency: the paper's 26.02 dB against eq. 15 and the measurement."""
+    mu1, mu2 = r.shape.mu1, r.shape.mu2
+    d = r.dynamic_range
+    g2, eq15, paper_db = d.delta_dr_db_vs_gamma2, d.delta_psi_db_eq15, d.paper_delta_psi_db
+    g2x = d.delta_dr_db_vs_gamma2_extrapolated  # clip points: what eq. 15 compares
+    pairs = ", ".join(f"({a}, {b})" for a, b in d.stage_pairs_26_02_db) or "none"
     if _agrees(g2x, eq15):
         measured = f"in line with eq. 15's {eq15:.2f} dB"
-        if m["gain_over_gamma2_by_construction"]:
+        if d.gain_over_gamma2_by_construction:
             measured += " (by construction, see above)"
     else:
         measured = f"not eq. 15's {eq15:.2f} dB either"
     measured += ", and " + ("in line with" if _agrees(g2x, paper_db) else "not") + f" {paper_db:.2f} dB"
     eq15_is_paper = _agrees(eq15, paper_db)
-    first = (
+    return (
         f"1. **{paper_db:.2f} dB {'is' if eq15_is_paper else 'is not'} eq. 15 for "
         f"{mu1}/{mu2}.** Eq. 15 with mu1 = {mu1}, mu2 = {mu2} gives {eq15:.2f} dB; the paper states "
         f"{paper_db:.2f} dB = 20 lg {10 ** (paper_db / 20):.0f} for its stages 10/80, which eq. 15 "
@@ -134,39 +151,43 @@ def _inconsistencies(m: dict[str, Any]) -> list[str]:
         f"The simulation measures {g2:.2f} dB over Gamma2 for {mu1}/{mu2} ({g2x:.2f} dB with the "
         f"extrapolated saturation points), {measured}."
     )
-    sat2 = m["saturated_fraction"]["gamma2"]
+
+
+def _eq18_inconsistency(r: ReproduceResult) -> str:
+    """The second inconsistency: Table 1 against eq. 18, and what omega measures."""
+    om, op = r.table1.omega, r.table1.omega_paper
+    paper_eq18 = op["gamma_hdr"] < min(op["gamma1"], op["gamma2"])
+    dr = r.dynamic_range.dr_db
+    ranking = " > ".join(_NAMES[k] for k in sorted(dr, key=dr.__getitem__, reverse=True))
+    sat2 = r.scene.saturated_fraction["gamma2"]
     pile = (
         f"whose {sat2:.0%} saturated pixels pile into its top bin"
         if sat2 > 0
         else "which has no saturated pixels"
     )
-    second = (
+    return (
         f"2. **Table 1 {'agrees with' if paper_eq18 else 'contradicts'} eq. 18.** The paper lists "
         f"omega(HDR) = {op['gamma_hdr']:,} and omega(Gamma2) = {op['gamma2']:,}, omega(Gamma1) = "
         f"{op['gamma1']:,}, so its own numbers {'satisfy' if paper_eq18 else 'do not satisfy'} eq. 18. "
-        f"In the simulation eq. 18 {'holds' if m['eq18_holds'] else 'does not hold'} (omega: "
+        f"In the simulation eq. 18 {'holds' if r.table1.eq18_holds else 'does not hold'} (omega: "
         f"{om['gamma1']:.4g} / {om['gamma2']:.4g} / {om['gamma_hdr']:.4g}): omega(HDR) "
         f"{'<' if om['gamma_hdr'] < om['gamma2'] else '>='} omega(Gamma2), {pile}; omega(HDR) "
         f"{'<' if om['gamma_hdr'] < om['gamma1'] else '>='} omega(Gamma1). Eq. 16-17 measure how "
         "evenly the grey levels are used, which is not the dynamic range: the measured DR (above) "
         f"ranks the images {ranking}."
     )
-    return ["## The paper's inconsistencies", "", first, second, ""]
 
 
-def report_markdown(m: dict[str, Any], cfg: BenchConfig, quick: bool) -> str:
-    """The report text (Markdown) from ``metrics.json``'s dict (every statement computed)."""
-    mu1, mu2, beta = m["mu1"], m["mu2"], m["beta"]
-    om, op = m["omega"], m["omega_paper"]
-    q = m["qualitative"]
-    dark, bright = m["darkest_patch"], m["brightest_patch"]
-    hv, bins = m["histogram_variance"], m["omega_binning"]
-    pixels = m["lines"] * m["columns"]
-    nbins = bins["stage_binning"]["n_bins"]
-    zero = dark.get("word_zero_fraction", {})
+def _inconsistencies(r: ReproduceResult) -> list[str]:
+    return ["## The paper's inconsistencies", "", _eq15_inconsistency(r), _eq18_inconsistency(r), ""]
+
+
+def _pedestal_note(r: ReproduceResult) -> str:
+    """Whether the word's pedestal keeps the darkest patch's noise unclipped."""
+    zero = r.scene.darkest_patch.get("word_zero_fraction", {})
     zeros = max(zero.values()) if zero else float("nan")
-    pedestal_note = (
-        f"The stage words carry a digital pedestal of {m['pedestal_dn']} DN (`dtdi.pedestal_dn`), "
+    return (
+        f"The stage words carry a digital pedestal of {r.shape.pedestal_dn} DN (`dtdi.pedestal_dn`), "
         "subtracted by every consumer; "
         + (
             "no pixel of the darkest patch is stored as 0 DN in Gamma1 or Gamma2, so the word does not "
@@ -176,67 +197,104 @@ def report_markdown(m: dict[str, Any], cfg: BenchConfig, quick: bool) -> str:
             "the dark noise there and its statistics are biased (raise `dtdi.pedestal_dn`)."
         )
     )
-    lines = [
+
+
+def _intro(r: ReproduceResult, cfg: BenchConfig, quick: bool) -> list[str]:
+    """Title and the run: command, provenance, rig, sensor, word, image."""
+    sh, rec = r.shape, r.record
+    return [
         "# Reproduction: *An HDR Imaging Method With DTDI Technology for Push-Broom Cameras*",
         "",
-        f"Made by `bench-sim reproduce{' --quick' if quick else ''}` (bench_sim {m['version']}, "
-        f"seed {m['seed']}, config sha256 `{m['config_sha256'][:16]}...`, engine `{m['engine']}`, "
-        f"variant `{m['variant']}`). Rig `{cfg.name}`: drum R = {cfg.drum.radius_m} m, "
+        f"Made by `bench-sim reproduce{' --quick' if quick else ''}` (bench_sim {rec.version}, "
+        f"seed {rec.seed}, config sha256 `{rec.config_sha256[:16]}...`, engine `{rec.engine}`, "
+        f"variant `{rec.variant}`). Rig `{cfg.name}`: drum R = {cfg.drum.radius_m} m, "
         f"{cfg.lens.focal_length_m * 1e3:.0f} mm f/{cfg.lens.f_number:g} lens at "
-        f"{cfg.lens.working_distance_m} m, {m['rows']} x {m['columns']} sensor "
+        f"{cfg.lens.working_distance_m} m, {sh.rows} x {sh.columns} sensor "
         f"({cfg.sensor.pixel_pitch_m * 1e6:.1f} um, {cfg.sensor.adc_bits}-bit pixels), "
-        f"output word beta = {beta} bit (Phi_FS = {m['phi_fs_dn']} DN), {m['lines']} lines from "
-        f"{m['frames']} frames. {pedestal_note}",
+        f"output word beta = {sh.beta} bit (Phi_FS = {sh.phi_fs_dn} DN), {sh.lines} lines from "
+        f"{sh.frames} frames. {_pedestal_note(r)}",
         "",
-        *_dr_section(m),
+    ]
+
+
+def _fig3_section(r: ReproduceResult) -> list[str]:
+    sat = r.scene.saturated_fraction
+    return [
         "## Fig. 3 - stage images from one pass",
         "",
         "![Fig. 3](fig3_stages.png)",
         "",
         f"Paper: the image brightens with the stage m; small m leaves the dark parts dark, large m "
-        f"saturates the bright parts. Simulation: stages {', '.join(str(k) for k in m['fig3_stages'])} "
-        f"of one DTDI pass over the same frames; Gamma2 (m = {mu2}) clips "
-        f"{m['saturated_fraction']['gamma2']:.1%} of its pixels, Gamma1 (m = {mu1}) "
-        f"{m['saturated_fraction']['gamma1']:.1%}.",
+        f"saturates the bright parts. Simulation: stages {', '.join(str(k) for k in r.shape.fig3_stages)} "
+        f"of one DTDI pass over the same frames; Gamma2 (m = {r.shape.mu2}) clips "
+        f"{sat['gamma2']:.1%} of its pixels, Gamma1 (m = {r.shape.mu1}) "
+        f"{sat['gamma1']:.1%}.",
         "",
-        f"## Fig. 4 - Gamma_HDR (mu1 = {mu1}, mu2 = {mu2}, eq. 11) and Gamma_TRA ({cfg.fusion.tra})",
+    ]
+
+
+def _fig4_section(r: ReproduceResult, tra: str) -> list[str]:
+    """Fig. 4 and the paper's qualitative claims, each with what was measured."""
+    mu1, mu2 = r.shape.mu1, r.shape.mu2
+    q, dark, bright = r.scene.qualitative, r.scene.darkest_patch, r.scene.brightest_patch
+    return [
+        f"## Fig. 4 - Gamma_HDR (mu1 = {mu1}, mu2 = {mu2}, eq. 11) and Gamma_TRA ({tra})",
         "",
         "![Fig. 4](fig4_hdr.png)",
         "",
-        "| qualitative result (paper, sec. 3) | measured | holds |",
-        "|---|---|---|",
-        f"| stage {mu2} saturates the brightly lit region | {bright['gamma2_saturated_fraction']:.1%} "
-        f"of the {bright['reflectance']:.0%} patch under the spot clipped | "
-        f"{_yes(q['stage_mu2_saturates_bright_region'])} |",
-        f"| stage {mu1} leaves the darkest patches in the noise (SNR < 2) | SNR "
-        f"{dark['snr']['gamma1']:.2f} on the {dark['reflectance']:.0%} patch under the fill | "
-        f"{_yes(q['stage_mu1_leaves_darkest_patch_in_noise'])} |",
-        f"| Gamma_HDR keeps the bright detail | {bright['gamma_hdr_saturated_fraction']:.1%} clipped; "
-        f"stage {mu1} at {bright['gamma1_fraction_of_phi_fs']:.0%} of Phi_FS there | "
-        f"{_yes(q['hdr_keeps_bright_unsaturated'])} |",
-        f"| Gamma_HDR lifts the dark detail (SNR >= 3 and >= 1.8 x Gamma1) | SNR "
-        f"{dark['snr']['gamma_hdr']:.2f} (x{dark['snr']['gamma_hdr'] / max(dark['snr']['gamma1'], 1e-9):.2f} "
-        f"over Gamma1; read-noise limit sqrt({mu2}/{mu1}) = {(mu2 / mu1) ** 0.5:.2f}) | "
-        f"{_yes(q['hdr_lifts_darkest_patch'])} |",
+        *markdown_table(["qualitative result (paper, sec. 3)", "measured", "holds"], [
+            [f"stage {mu2} saturates the brightly lit region",
+             f"{bright['gamma2_saturated_fraction']:.1%} of the {bright['reflectance']:.0%} patch under the "
+             "spot clipped",
+             _yes(q["stage_mu2_saturates_bright_region"])],
+            [f"stage {mu1} leaves the darkest patches in the noise (SNR < 2)",
+             f"SNR {dark['snr']['gamma1']:.2f} on the {dark['reflectance']:.0%} patch under the fill",
+             _yes(q["stage_mu1_leaves_darkest_patch_in_noise"])],
+            ["Gamma_HDR keeps the bright detail",
+             f"{bright['gamma_hdr_saturated_fraction']:.1%} clipped; stage {mu1} at "
+             f"{bright['gamma1_fraction_of_phi_fs']:.0%} of Phi_FS there",
+             _yes(q["hdr_keeps_bright_unsaturated"])],
+            ["Gamma_HDR lifts the dark detail (SNR >= 3 and >= 1.8 x Gamma1)",
+             f"SNR {dark['snr']['gamma_hdr']:.2f} "
+             f"(x{dark['snr']['gamma_hdr'] / max(dark['snr']['gamma1'], 1e-9):.2f} over Gamma1; "
+             f"read-noise limit sqrt({mu2}/{mu1}) = {(mu2 / mu1) ** 0.5:.2f})",
+             _yes(q["hdr_lifts_darkest_patch"])],
+        ]),
         "",
         "Saturated pixels: "
-        + ", ".join(f"{_NAMES[k]} {v:.1%}" for k, v in m["saturated_fraction"].items())
+        + ", ".join(f"{_NAMES[k]} {v:.1%}" for k, v in r.scene.saturated_fraction.items())
         + " (Gamma_HDR: where Gamma1 itself clips).",
         "",
+    ]
+
+
+def _table1_section(r: ReproduceResult) -> list[str]:
+    """Table 1 side by side, and why the paper's values cannot come from eq. 17 as printed."""
+    mu1, mu2 = r.shape.mu1, r.shape.mu2
+    t = r.table1
+    om, op, hv, bins = t.omega, t.omega_paper, t.histogram_variance, t.omega_binning
+    pixels = r.shape.lines * r.shape.columns
+    nbins = bins["stage_binning"]["n_bins"]
+    return [
         "## Table 1 - omega (eq. 16-17)",
         "",
-        "| image | paper omega | simulated omega | simulated sigma^2[rho] (eq. 17 before / M*N) |",
-        "|---|---:|---:|---:|",
-        *[
-            f"| {name} | {op[k]:,} | {om[k]:.4g} | {hv[k]:.4g} |"
-            for k, name in (
-                ("gamma1", f"Gamma1 (m = {mu1})"),
-                ("gamma2", f"Gamma2 (m = {mu2})"),
-                ("gamma_hdr", "Gamma_HDR"),
-            )
-        ],
-        f"| eq. 18 `omega(HDR) < min(omega1, omega2)` | "
-        f"{_yes(op['gamma_hdr'] < min(op['gamma1'], op['gamma2']))} | {_yes(m['eq18_holds'])} | |",
+        *markdown_table(
+            ["image", "paper omega", "simulated omega", "simulated sigma^2[rho] (eq. 17 before / M*N)"],
+            [
+                *(
+                    [name, f"{op[k]:,}", f"{om[k]:.4g}", f"{hv[k]:.4g}"]
+                    for k, name in (
+                        ("gamma1", f"Gamma1 (m = {mu1})"),
+                        ("gamma2", f"Gamma2 (m = {mu2})"),
+                        ("gamma_hdr", "Gamma_HDR"),
+                    )
+                ),
+                ["eq. 18 `omega(HDR) < min(omega1, omega2)`",
+                 _yes(op["gamma_hdr"] < min(op["gamma1"], op["gamma2"])), _yes(t.eq18_holds), ""],
+            ],
+            "lrrr",
+            compact_empty=True,
+        ),
         "",
         f"Binning: {bins['stage_binning']['description']} for the stage images; "
         f"{bins['hdr_binning']['description']} for Gamma_HDR; {bins['variance']} variance of the "
@@ -251,18 +309,62 @@ def report_markdown(m: dict[str, Any], cfg: BenchConfig, quick: bool) -> str:
             else "lie within that bound."
         ),
         "",
-        *_inconsistencies(m),
+    ]
+
+
+def _timings_section(r: ReproduceResult) -> list[str]:
+    steps = r.timings.timings_s if r.timings is not None else {}
+    wall = r.timings.wall_s if r.timings is not None else float("nan")
+    return [
         "## Timings",
         "",
-        "| step | s |",
-        "|---|---:|",
-        *[f"| {k} | {v:.2f} |" for k, v in sorted(m.get("timings_s", {}).items(), key=_step_order)],
-        f"| total | {m.get('wall_s', float('nan')):.2f} |",
+        *markdown_table(
+            ["step", "s"],
+            [*([k, f"{v:.2f}"] for k, v in sorted(steps.items(), key=_step_order)), ["total", f"{wall:.2f}"]],
+            "lr",
+        ),
         "",
+    ]
+
+
+def report_markdown(r: ReproduceResult, cfg: BenchConfig, quick: bool) -> str:
+    """The report text (Markdown) from the run's result (every statement computed)."""
+    lines = [
+        *_intro(r, cfg, quick),
+        *_dr_section(r),
+        *_fig3_section(r),
+        *_fig4_section(r, cfg.fusion.tra),
+        *_table1_section(r),
+        *_inconsistencies(r),
+        *_timings_section(r),
     ]
     return "\n".join(lines)
 
 
-def write_report(path: Path, metrics: dict[str, Any], cfg: BenchConfig, quick: bool) -> Path:
+def write_report(path: Path, result: ReproduceResult, cfg: BenchConfig, quick: bool) -> Path:
     """Write :func:`report_markdown` to ``path`` atomically."""
-    return write_text(path, report_markdown(metrics, cfg, quick))
+    return write_text(path, report_markdown(result, cfg, quick))
+
+
+def write_table1(path: Path, r: ReproduceResult) -> Path:
+    """``table1.csv``: omega of the three images (simulated and the paper's), the histogram
+    variance, the binning and the provenance; written atomically."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["image", "stage", "omega_simulated", "omega_paper", "histogram_variance_simulated"])
+    mu1, mu2, t = r.shape.mu1, r.shape.mu2, r.table1
+    for key, name, stage in (
+        ("gamma1", "Gamma1", mu1),
+        ("gamma2", "Gamma2", mu2),
+        ("gamma_hdr", "Gamma_HDR", f"{mu1}+{mu2}"),
+    ):
+        w.writerow(
+            [name, stage, f"{t.omega[key]:.6g}", PAPER["omega"][key], f"{t.histogram_variance[key]:.6g}"]
+        )
+    w.writerow([])
+    w.writerow(["# binning", str(t.omega_binning)])
+    w.writerow(["# seed", r.record.seed, "config_sha256", r.record.config_sha256])
+    w.writerow(["# version", r.record.version])
+    with atomic_path(path) as tmp:
+        tmp.write_text(buf.getvalue())
+    return path

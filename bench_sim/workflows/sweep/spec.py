@@ -54,14 +54,25 @@ import itertools
 import json
 import math
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel
+from pydantic import BaseModel, BeforeValidator, ConfigDict, model_validator
 
-from bench_sim.config import BenchConfig, ConfigError, config_to_toml_dict, load_config, with_overrides
+from bench_sim.config import (
+    BenchConfig,
+    ConfigError,
+    config_from_dict,
+    config_to_toml_dict,
+    load_config,
+    quick_config,
+    read_toml,
+    validate_model,
+    with_overrides,
+)
 from bench_sim.errors import BenchSimError
 
 __all__ = [
@@ -94,6 +105,68 @@ SPEC_KEYS: dict[str, str] = {
 }
 #: Points above which a spec is refused (a typo in a range, not a study).
 MAX_POINTS = 100_000
+_NEED_POINTS = 'custom mode needs points = "FILE.csv" (relative to the spec)'
+
+
+def _check(ok: Callable[[Any], bool], need: str) -> BeforeValidator:
+    """A check of a spec value as it is in the file: ``ok(value)`` or ``ValueError(need)``."""
+
+    def check(value: Any) -> Any:
+        if not ok(value):
+            raise ValueError(need)
+        return value
+
+    return BeforeValidator(check)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_name(v: Any) -> bool:
+    return isinstance(v, str) and v != ""
+
+
+def _is_tables(v: Any) -> bool:
+    return isinstance(v, list) and bool(v) and all(isinstance(p, dict) for p in v)
+
+
+class _SpecFile(BaseModel):
+    """The top level of a sweep spec (:data:`SPEC_KEYS`; unknown keys refused), each value
+    checked as it is in the file (no conversions)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: Annotated[str | None, _check(_is_name, "needs a non-empty string")] = None
+    description: Annotated[str, _check(lambda v: isinstance(v, str), "needs a string")] = ""
+    base: Annotated[str | None, _check(lambda v: isinstance(v, str), "needs a config file name")] = None
+    quick: Annotated[bool, _check(lambda v: isinstance(v, bool), "needs true or false")] = False
+    seed: Annotated[int, _check(lambda v: _is_int(v) and v >= 0, "needs an integer >= 0")] = 0
+    mode: Annotated[str, _check(lambda v: v in MODES, f"allowed {', '.join(MODES)}")] = "product"
+    noise: Annotated[str, _check(lambda v: v in NOISE, f"allowed {', '.join(NOISE)}")] = "independent"
+    overrides: Annotated[
+        dict[str, Any], _check(lambda v: isinstance(v, dict), "needs a table ([overrides])")
+    ] = {}
+    parameters: Annotated[
+        list[dict[str, Any]] | None, _check(_is_tables, "needs [[parameters]] tables (key and values)")
+    ] = None
+    points: Annotated[
+        str | None,
+        _check(lambda v: isinstance(v, str), _NEED_POINTS),
+    ] = None
+
+    @model_validator(mode="after")
+    def _parts_of_the_mode(self) -> _SpecFile:
+        if self.mode == "custom":
+            if self.parameters is not None:
+                raise ValueError("mode = 'custom' takes its keys from the points file: remove [[parameters]]")
+            if self.points is None:
+                raise ValueError(f"points = None: {_NEED_POINTS}")
+        elif self.points is not None:
+            raise ValueError(f"points = {self.points!r}: only for mode = 'custom'")
+        elif self.parameters is None:
+            raise ValueError("needs [[parameters]] tables (key and values)")
+        return self
 
 
 @dataclass(frozen=True)
@@ -231,11 +304,7 @@ def _cell(text: str) -> Any:
         return text
 
 
-def _custom_points(spec: Path, table: Any) -> tuple[tuple[str, ...], list[dict[str, Any]]]:
-    if not isinstance(table, str):
-        raise _err(
-            spec, f"points = {table!r}: custom mode needs points = \"FILE.csv\" (relative to the spec)"
-        )
+def _custom_points(spec: Path, table: str) -> tuple[tuple[str, ...], list[dict[str, Any]]]:
     path = (spec.parent / table).resolve()
     if not path.is_file():
         raise _err(spec, f"points = {table!r}: no such file {path}")
@@ -256,11 +325,56 @@ def _validated(spec: Path, base: dict[str, Any], values: dict[str, Any], index: 
         data = set_key(data, key, value)
     where = f"{spec} point {index} ({', '.join(f'{k} = {v!r}' for k, v in values.items())})"
     try:
-        from bench_sim.config import config_from_dict
-
         return config_from_dict(data, source=where)
     except ConfigError as exc:
         raise ConfigError(str(exc).replace("config error: ", "sweep spec ", 1)) from None
+
+
+def _base_config(spec: Path, top: _SpecFile) -> BenchConfig:
+    """The spec's base bench: its config file, the quick preset, then ``[overrides]``."""
+    base_cfg = load_config((spec.parent / top.base).resolve() if top.base else None)
+    if top.quick:
+        base_cfg = quick_config(base_cfg)
+    if top.overrides:
+        base_cfg = with_overrides(base_cfg, top.overrides, source=f"{spec} [overrides]")
+    return base_cfg
+
+
+def _parameters(spec: Path, tables: list[dict[str, Any]]) -> dict[str, list[Any]]:
+    """Key -> values of the ``[[parameters]]`` tables, in their order."""
+    values: dict[str, list[Any]] = {}
+    for p in tables:
+        key = p.get("key")
+        if not isinstance(key, str) or not key:
+            raise _err(spec, f"[[parameters]] {p!r}: needs key = \"section.setting\"")
+        extra = sorted(set(p) - {"key", *VALUE_FORMS})
+        if extra:
+            allowed = ", ".join(("key", *VALUE_FORMS))
+            raise _err(spec, f"parameter {key}: unknown '{extra[0]}' (allowed: {allowed})")
+        if key in values:
+            raise _err(spec, f"parameter {key}: given twice")
+        values[key] = parameter_values(spec, key, p)
+    return values
+
+
+Combos = list[tuple[dict[str, Any], str | None]]
+
+
+def _combinations(spec: Path, top: _SpecFile) -> tuple[tuple[str, ...], dict[str, list[Any]], Combos]:
+    """The swept keys, their values and the points as ``(values, varied key)`` of the mode."""
+    if top.mode == "custom":
+        assert top.points is not None  # checked by _SpecFile
+        keys, rows = _custom_points(spec, top.points)
+        return keys, {k: [row[k] for row in rows] for k in keys}, [(row, None) for row in rows]
+    assert top.parameters is not None  # checked by _SpecFile
+    values = _parameters(spec, top.parameters)
+    keys = tuple(values)
+    if top.mode == "product":
+        grid = itertools.product(*values.values())
+        combos: Combos = [(dict(zip(keys, c, strict=True)), None) for c in grid]
+    else:
+        combos = [({k: v}, k) for k in keys for v in values[k]]
+    return keys, values, combos
 
 
 def load_spec(path: str | Path) -> SweepSpec:
@@ -270,81 +384,11 @@ def load_spec(path: str | Path) -> SweepSpec:
     and what is allowed) on the first problem, before anything runs.
     """
     spec = Path(path).expanduser().resolve()
-    if not spec.is_file():
-        raise BenchSimError(f"sweep spec {spec}: no such file")
-    try:
-        raw = tomllib.loads(spec.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise _err(spec, f"not valid TOML ({exc})") from None
-    unknown = sorted(set(raw) - set(SPEC_KEYS))
-    if unknown:
-        raise _err(spec, f"unknown key '{unknown[0]}' (allowed: {', '.join(SPEC_KEYS)})")
-    mode = raw.get("mode", "product")
-    if mode not in MODES:
-        raise _err(spec, f"mode = {mode!r}: allowed {', '.join(MODES)}")
-    noise = raw.get("noise", "independent")
-    if noise not in NOISE:
-        raise _err(spec, f"noise = {noise!r}: allowed {', '.join(NOISE)}")
-    seed = raw.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise _err(spec, f"seed = {seed!r}: needs an integer >= 0")
-    quick = raw.get("quick", False)
-    if not isinstance(quick, bool):
-        raise _err(spec, f"quick = {quick!r}: needs true or false")
-    name = raw.get("name", spec.stem)
-    description = raw.get("description", "")
-    if not isinstance(name, str) or not name or not isinstance(description, str):
-        raise _err(spec, "name and description must be strings (name not empty)")
-
-    base_file = raw.get("base")
-    if base_file is not None and not isinstance(base_file, str):
-        raise _err(spec, f"base = {base_file!r}: needs a config file name")
-    base_cfg = load_config((spec.parent / base_file).resolve() if base_file else None)
-    if quick:
-        from bench_sim.workflows.reproduce.run import quick_config
-
-        base_cfg = quick_config(base_cfg)
-    overrides = raw.get("overrides", {})
-    if not isinstance(overrides, dict):
-        raise _err(spec, f"overrides = {overrides!r}: needs a table ([overrides])")
-    if overrides:
-        base_cfg = with_overrides(base_cfg, overrides, source=f"{spec} [overrides]")
-    base = config_to_toml_dict(base_cfg)
-
-    keys: tuple[str, ...]
-    values: dict[str, list[Any]] = {}
-    combos: list[tuple[dict[str, Any], str | None]] = []
-    if mode == "custom":
-        if "parameters" in raw:
-            raise _err(spec, "mode = 'custom' takes its keys from the points file: remove [[parameters]]")
-        keys, rows = _custom_points(spec, raw.get("points"))
-        combos = [(row, None) for row in rows]
-        for k in keys:
-            values[k] = [row[k] for row in rows]
-    else:
-        if "points" in raw:
-            raise _err(spec, f"points = {raw['points']!r}: only for mode = 'custom'")
-        params = raw.get("parameters")
-        if not isinstance(params, list) or not params or not all(isinstance(p, dict) for p in params):
-            raise _err(spec, "needs [[parameters]] tables (key and values)")
-        key_list = []
-        for p in params:
-            key = p.get("key")
-            if not isinstance(key, str) or not key:
-                raise _err(spec, f"[[parameters]] {p!r}: needs key = \"section.setting\"")
-            extra = sorted(set(p) - {"key", *VALUE_FORMS})
-            if extra:
-                allowed = ", ".join(("key", *VALUE_FORMS))
-                raise _err(spec, f"parameter {key}: unknown '{extra[0]}' (allowed: {allowed})")
-            if key in key_list:
-                raise _err(spec, f"parameter {key}: given twice")
-            key_list.append(key)
-            values[key] = parameter_values(spec, key, p)
-        keys = tuple(key_list)
-        if mode == "product":
-            combos = [(dict(zip(keys, c, strict=True)), None) for c in itertools.product(*values.values())]
-        else:
-            combos = [({k: v}, k) for k in keys for v in values[k]]
+    label = f"sweep spec {spec}"
+    raw = read_toml(spec, label, "a sweep spec")
+    top = validate_model(_SpecFile, raw, label, unknown=f"allowed: {', '.join(SPEC_KEYS)}")
+    base_cfg = _base_config(spec, top)
+    keys, values, combos = _combinations(spec, top)
     for k in keys:
         if not key_exists(base_cfg, k):
             raise _err(spec, f"key {k!r}: not a setting of the bench config (check the section and name)")
@@ -352,8 +396,12 @@ def load_spec(path: str | Path) -> SweepSpec:
         raise _err(spec, "no points")
     if len(combos) > MAX_POINTS:
         raise _err(spec, f"{len(combos)} points: more than {MAX_POINTS}; split the sweep")
+    base = config_to_toml_dict(base_cfg)
     points = tuple(
         SweepPoint(i, vals, _validated(spec, base, vals, i), varied)
         for i, (vals, varied) in enumerate(combos)
     )
-    return SweepSpec(spec, name, description, mode, noise, seed, quick, base_cfg, keys, values, points, raw)
+    return SweepSpec(
+        spec, top.name or spec.stem, top.description, top.mode, top.noise, top.seed, top.quick, base_cfg,
+        keys, values, points, raw,
+    )

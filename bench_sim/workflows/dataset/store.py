@@ -1,0 +1,328 @@
+"""The layout of a dataset folder: its skeleton (``dataset.json``, an empty ``data.zarr`` with
+the whole schema, ``samples/``), the checks of ``--out`` before a run, the sizes, and the
+manifest rebuilt from the samples' records.
+
+:mod:`bench_sim.workflows.dataset.reader` names the files and reads them; this module writes the
+skeleton and the manifest (the samples' arrays and records are written by
+:mod:`bench_sim.workflows.dataset.run` as they complete).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bench_sim.config import config_sha256, config_to_toml_text
+from bench_sim.errors import BenchSimError
+from bench_sim.io import atomic_path, check_output_dir, umask, write_csv, write_json
+from bench_sim.pipeline import VARIABLES_BY_NAME, Variable
+from bench_sim.runtime.provenance import provenance
+from bench_sim.version import __version__
+from bench_sim.workflows.dataset.reader import (
+    COMPLETION_RECORD,
+    DATA_STORE,
+    DATASET_JSON,
+    DATASET_KIND,
+    FUSED_VARIABLES,
+    MANIFEST_CSV,
+    MANIFEST_PARQUET,
+    RECORDS_DIR,
+    STAGE_VARIABLES,
+    read_records,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from bench_sim.workflows.dataset.spec import DatasetSpec
+
+__all__ = [
+    "FORMAT_VERSION",
+    "bytes_per_sample",
+    "estimate_bytes",
+    "folder_state",
+    "check_folder",
+    "lay_out",
+    "manifest_frame",
+    "manifest_meta",
+    "write_manifest",
+]
+
+#: Format of the dataset folder (``dataset.json``'s ``format``), raised on incompatible changes
+FORMAT_VERSION = 1
+#: Bytes of a sample's record and manifest rows, and of the card, thumbnails and metadata
+RECORD_BYTES, FIXED_BYTES = 16 * 1024, 8 * 2**20
+
+
+def _pass_variable(name: str) -> Variable:
+    """The pass variable a dataset variable stores (:data:`bench_sim.pipeline.PASS_VARIABLES`)."""
+    return VARIABLES_BY_NAME[name]
+
+
+def bytes_per_sample(stages: int, lines: int, columns: int, fused: bool) -> int:
+    """Uncompressed bytes of one sample's arrays: an upper bound of what it takes on disk."""
+    per_pixel = sum(np.dtype(d).itemsize for d in STAGE_VARIABLES.values()) * stages
+    if fused:
+        per_pixel += sum(np.dtype(d).itemsize for d in FUSED_VARIABLES.values())
+    return per_pixel * lines * columns
+
+
+def estimate_bytes(spec: DatasetSpec, samples: int | None = None) -> int:
+    """Upper bound of the bytes a dataset (or ``samples`` of its samples) writes: uncompressed
+    arrays, records and manifest rows, plus the card, thumbnails and metadata."""
+    n = spec.samples if samples is None else int(samples)
+    per = bytes_per_sample(len(spec.stages), spec.base.lines, spec.base.sensor.columns, spec.fused)
+    return n * (per + RECORD_BYTES) + FIXED_BYTES
+
+
+# --- the folder ----------------------------------------------------------------------------------
+
+
+def folder_state(out: Path) -> str:
+    """``absent``, ``empty``, ``dataset`` (holds a bench_sim dataset.json), ``file`` or ``other``."""
+    if not out.exists():
+        return "absent"
+    if not out.is_dir():
+        return "file"
+    if not any(out.iterdir()):
+        return "empty"
+    try:
+        if json.loads((out / DATASET_JSON).read_text()).get("kind") == DATASET_KIND:
+            return "dataset"
+    except (OSError, ValueError, AttributeError):
+        pass
+    return "other"
+
+
+def _schema(spec: DatasetSpec) -> dict[str, Any]:
+    """``dataset.json``'s ``schema``: every variable's dimensions, type, chunks, shape and units."""
+    lines, cols, n_st = spec.base.lines, spec.base.sensor.columns, len(spec.stages)
+    variables: dict[str, Any] = {}
+    for name, dtype in STAGE_VARIABLES.items():
+        variables[name] = {
+            "dims": ["sample", "stage", "line", "column"], "dtype": dtype, "chunks": [1, 1, lines, cols],
+            "shape": [spec.samples, n_st, lines, cols],
+            "units": _pass_variable(name).units, "long_name": _pass_variable(name).doc,
+        }
+    if spec.fused:
+        for name, dtype in FUSED_VARIABLES.items():
+            variables[name] = {
+                "dims": ["sample", "line", "column"], "dtype": dtype, "chunks": [1, lines, cols],
+                "shape": [spec.samples, lines, cols],
+                "units": _pass_variable(name).units, "long_name": _pass_variable(name).doc,
+            }
+    return {"variables": variables, "store": DATA_STORE, "zarr_format": 3}
+
+
+def _info(spec: DatasetSpec) -> dict[str, Any]:
+    """The content of ``dataset.json``."""
+    try:
+        spec_file = os.path.relpath(spec.path)
+    except ValueError:  # pragma: no cover - another drive
+        spec_file = str(spec.path)
+    if spec_file.startswith(".."):
+        spec_file = spec.path.name
+    return {
+        "kind": DATASET_KIND,
+        "format": FORMAT_VERSION,
+        "name": spec.name,
+        "description": spec.description,
+        "samples": spec.samples,
+        "seed": spec.seed,
+        "stages": list(spec.stages),
+        "lines": spec.base.lines,
+        "columns": spec.base.sensor.columns,
+        "fused": spec.fused,
+        "spec_file": spec_file,
+        "spec": spec.raw,
+        "spec_sha256": spec.identity(),
+        "randomize": {k: d.model_dump() for k, d in spec.randomize.items()},
+        "images": spec.images,
+        "streams": (
+            "sample i owns numpy.random.SeedSequence(seed, spawn_key=(i,)) = SeedSequence(seed).spawn(n)[i]; "
+            "its child 0 draws the randomised values (keys in sorted order), its child 1 drives the "
+            "simulation (render seed, target, fixed pattern, temporal noise)"
+        ),
+        "base": provenance(spec.base, spec.seed, kind="dataset base bench"),
+        "schema": _schema(spec),
+    }
+
+
+def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
+    """``dataset.json``, an empty ``data.zarr`` with the whole schema and ``samples/``."""
+    import dask.array as da
+    import xarray as xr
+
+    info = _info(spec)
+    schema = info["schema"]["variables"]
+    coords = {
+        "sample": np.arange(spec.samples, dtype=np.int64),
+        "stage": np.asarray(spec.stages, dtype=np.int64),
+        "line": np.arange(spec.base.lines, dtype=np.int64),
+        "column": np.arange(spec.base.sensor.columns, dtype=np.int64),
+    }
+    data = {
+        name: (v["dims"], da.zeros(v["shape"], chunks=v["chunks"], dtype=v["dtype"]))
+        for name, v in schema.items()
+    }
+    ds = xr.Dataset(data, coords=coords)
+    for name, v in schema.items():
+        ds[name].attrs.update(units=v["units"], long_name=v["long_name"])
+    ds["sample"].attrs.update(units="1", long_name="sample index (spawn key of its random stream)")
+    ds["stage"].attrs.update(units="1", long_name="DTDI stage m (rows summed)")
+    ds["line"].attrs.update(units="1", long_name="scene line (material at line * delta along the track)")
+    ds["column"].attrs.update(units="1", long_name="sensor column")
+    ds.attrs.update(
+        title=f"bench_sim dataset {spec.name}",
+        seed=spec.seed,
+        version=__version__,
+        spec_sha256=info["spec_sha256"],
+        base_config=config_to_toml_text(spec.base),
+        base_config_sha256=config_sha256(spec.base),
+        beta_bits=int(spec.base.dtdi.beta_bits),
+        pedestal_dn=float(spec.base.dtdi.pedestal_dn),
+        complete_samples="see samples/*.json records (status complete) or the manifest",
+    )
+    if spec.fused:
+        ds.attrs.update(mu1=int(spec.base.fusion.mu1), mu2=int(spec.base.fusion.mu2))
+    encoding = {name: {"chunks": tuple(v["chunks"])} for name, v in schema.items()}
+    with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
+        warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
+        ds.to_zarr(folder / DATA_STORE, mode="w-", zarr_format=3, consolidated=True, compute=False,
+                   encoding=encoding)
+    (folder / RECORDS_DIR).mkdir()
+    write_json(folder / DATASET_JSON, info)
+
+
+def lay_out(spec: DatasetSpec, out: Path) -> None:
+    """Make the skeleton in a temporary folder beside ``out`` and rename it into place (replacing
+    an empty folder or a dataset that may be replaced)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
+    try:
+        _write_skeleton(spec, tmp)
+        os.chmod(tmp, 0o777 & ~umask())
+        old = None
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
+            os.replace(out, old / "set")
+        os.replace(tmp, out)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def check_folder(spec: DatasetSpec, out: Path, *, reuse: bool) -> str:
+    """Decide what to do with ``out`` before anything runs: ``create`` (lay out a new dataset,
+    replacing an empty folder or a replaceable dataset) or ``reuse`` (the same dataset)."""
+    state = folder_state(out)
+    if state == "file":
+        raise BenchSimError(f"--out = {str(out)!r}: is a file, not a folder")
+    if state == "other":
+        raise BenchSimError(
+            f"--out = {str(out)!r}: folder exists, is not empty and holds no bench_sim dataset: choose "
+            "a new or empty folder"
+        )
+    if state in ("absent", "empty"):
+        check_output_dir(out)
+        return "create"
+    info = json.loads((out / DATASET_JSON).read_text())
+    records = read_records(out)
+    has_data = (out / DATA_STORE).is_dir()
+    done = sum(1 for r in records.values() if r.get("status") == "complete")
+    if not reuse:
+        if (out / COMPLETION_RECORD).is_file() or not records or not has_data:
+            return "create"  # a complete dataset, or one with no sample yet, is replaced
+        raise BenchSimError(
+            f"--out = {str(out)!r}: holds an incomplete dataset ({done} of {info.get('samples')} samples "
+            "complete): --resume completes it; delete the folder to start again"
+        )
+    if not has_data:
+        return "create"  # a card without its data (e.g. a committed example): make the data
+    if info.get("spec_sha256") != spec.identity():
+        raise BenchSimError(
+            f"--out = {str(out)!r}: holds a dataset made from another spec (spec, base bench or image "
+            "files changed): use a new folder, or run without --resume to replace a complete one"
+        )
+    made_with = info.get("base", {}).get("version")
+    if made_with != __version__:
+        raise BenchSimError(
+            f"--out = {str(out)!r}: made with bench_sim {made_with}, this is {__version__}: samples would "
+            "not match; use a new folder"
+        )
+    return "reuse"
+
+
+# --- manifest ------------------------------------------------------------------------------------
+
+
+def manifest_frame(
+    spec: DatasetSpec, records: dict[int, dict[str, Any]], values: Sequence[dict[str, Any]]
+) -> pd.DataFrame:
+    """One row per sample: ``sample``, ``seed``, every randomised key, ``config_sha256``, the
+    summary metrics, ``status`` (``complete`` / ``failed`` / ``pending``), ``error``, ``wall_s``,
+    ``worker``. ``values``: every sample's drawn values (pending samples list theirs)."""
+    import pandas as pd
+
+    metric_names: list[str] = ["scene_dr_db"]
+    for m in spec.stages:
+        metric_names += [f"saturated_fraction_m{m}", f"snr_dark_m{m}", f"snr_bright_m{m}"]
+    rows = []
+    for i in range(spec.samples):
+        rec = records.get(i, {})
+        drawn = rec.get("values") or values[i]
+        metrics = rec.get("metrics") or {}
+        row: dict[str, Any] = {"sample": i, "seed": spec.seed}
+        row.update({k: drawn.get(k) for k in spec.randomize})
+        row["config_sha256"] = rec.get("config_sha256", "")
+        row.update({k: float(metrics.get(k, np.nan)) for k in metric_names})
+        row.update(
+            status=rec.get("status", "pending"), error=rec.get("error") or "",
+            wall_s=float(rec.get("wall_s", np.nan)), worker=rec.get("worker", ""),
+        )
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def write_manifest(
+    out: Path, spec: DatasetSpec, meta: dict[str, Any], values: Sequence[dict[str, Any]]
+) -> pd.DataFrame:
+    """``manifest.parquet`` (provenance in the schema metadata, key ``bench_sim``) and
+    ``manifest.csv`` (provenance as ``#`` lines), both rebuilt from the records."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    df = manifest_frame(spec, read_records(out), values)
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    provenance = json.dumps(meta, sort_keys=True, default=str).encode()
+    table = table.replace_schema_metadata({**(table.schema.metadata or {}), b"bench_sim": provenance})
+    with atomic_path(out / MANIFEST_PARQUET) as tmp:
+        pq.write_table(table, tmp)
+    rows = [[_csv_value(v) for v in r] for r in df.itertuples(index=False, name=None)]
+    write_csv(out / MANIFEST_CSV, list(df.columns), rows, metadata=meta)
+    return df
+
+
+def _csv_value(v: Any) -> Any:
+    if isinstance(v, np.generic):
+        v = v.item()
+    return v
+
+def manifest_meta(spec: DatasetSpec) -> dict[str, Any]:
+    """The provenance of the manifest, the card's thumbnails and the completion record."""
+    return {
+        "version": __version__, "seed": spec.seed, "config_sha256": config_sha256(spec.base),
+        "spec_sha256": spec.identity(), "dataset": spec.name,
+    }
+
+

@@ -1,0 +1,138 @@
+"""One sweep point in a worker: the chain on the point's stream, measured into one flat record.
+
+:func:`measure_point` runs ``simulate``'s pass with its truth, the eq. 11 fusion, the pass
+metrics (:mod:`bench_sim.measure.pass_metrics`), the measured dynamic range through the chain
+(:mod:`bench_sim.measure.chain_dr`) and the flicker banding per stage.
+
+The dynamic range through the chain is a property of the camera (sensor, timing, DTDI, the
+fused stages), not of the lights or the target: each worker measures it once per camera
+(:func:`bench_sim.runtime.execution.worker_cache`) on the sweep's root stream
+``SeedSequence(seed)`` (the points draw from its children), so every point with the same
+camera reports the same numbers, whichever worker ran it.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from bench_sim.config import BenchConfig
+from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+from bench_sim.measure.chain_dr import measure_chain_dynamic_range
+from bench_sim.measure.pass_metrics import pass_metrics
+from bench_sim.metrics.banding import banding_amplitude, folded_cycles_per_line, illumination_profile
+from bench_sim.pipeline import run_pass
+from bench_sim.runtime.execution import task_seed_sequence, worker_cache
+from bench_sim.sensor.model import stage_offset_dn
+from bench_sim.workflows.sweep.plan import IMAGES, PointTask, banding_column
+
+__all__ = ["measure_point"]
+
+
+def _camera_key(cfg: BenchConfig, root_seed: int, dr_levels: int) -> str:
+    """What the measured DR depends on: sensor, timing, DTDI, the fused stages, the stream."""
+    part = {
+        "sensor": cfg.sensor.model_dump(mode="json"),
+        "timing": cfg.timing.model_dump(mode="json"),
+        "dtdi": cfg.dtdi.model_dump(mode="json"),
+        "mu": [cfg.fusion.mu1, cfg.fusion.mu2],
+        "seed": root_seed,
+        "levels": dr_levels,
+    }
+    return "sweep-chain-dr:" + json.dumps(part, sort_keys=True)
+
+
+def _camera_dr(cfg: BenchConfig, root_seed: int, dr_levels: int) -> Any:
+    return worker_cache(
+        _camera_key(cfg, root_seed, dr_levels),
+        lambda: measure_chain_dynamic_range(
+            cfg, np.random.SeedSequence(root_seed), n_levels=dr_levels, columns=min(64, cfg.sensor.columns)
+        ),
+    )
+
+
+def _renders(setup: Any) -> int:
+    """Mitsuba renders a pass's set-up made (0 when the fast engine's records were cached)."""
+    return int(setup.info["mitsuba_renders"])
+
+
+def _camera_columns(dr: Any) -> dict[str, Any]:
+    """The camera columns from the chain's measured dynamic range."""
+    rec: dict[str, Any] = {f"dr_db_{name}": dr.images[name].dr_db for name in IMAGES}
+    rec.update({
+        "gain_db_vs_gamma1": dr.gain_over_gamma1_db,
+        "gain_db_vs_gamma2": dr.gain_over_gamma2_db,
+        "eq15_db": dr.eq15_db,
+        "gain_db_vs_gamma2_extrapolated": dr.gain_over_gamma2_extrapolated_db,
+        "eq15_error_db": dr.gain_over_gamma2_extrapolated_db - dr.eq15_db,
+        "eq15_by_construction": dr.gain_over_gamma2_by_construction,
+    })
+    return rec
+
+
+def _scene_columns(pm: Any) -> dict[str, Any]:
+    """The scene columns from the pass metrics (:class:`~bench_sim.measure.pass_metrics.PassMetrics`)."""
+    omega = {"gamma1": pm.eq18.omega1, "gamma2": pm.eq18.omega2, "gamma_hdr": pm.eq18.omega_hdr}
+    rec: dict[str, Any] = {"scene_range_db": pm.scene_range_db}
+    rec.update({f"saturated_fraction_{name}": pm.saturated_fraction[name] for name in IMAGES})
+    rec.update({f"omega_{name}": omega[name] for name in IMAGES})
+    rec.update(eq18_holds=pm.eq18.holds, no_patches=pm.no_patches)
+    cap = pm.captured_range_db or {}
+    for name in IMAGES:
+        rec[f"captured_range_db_{name}"] = cap.get(name)
+        rec[f"clipped_fraction_{name}"] = (pm.clipped_fraction or {}).get(name)
+    if cap.get("gamma_hdr") is not None and cap.get("gamma1") is not None:
+        rec["captured_gain_db_vs_gamma1"] = cap["gamma_hdr"] - cap["gamma1"]
+    for which, patch in (("darkest", pm.darkest_patch), ("brightest", pm.brightest_patch)):
+        rec[f"{which}_patch"] = patch["patch"] if patch else None
+        rec[f"{which}_reflectance"] = patch["reflectance"] if patch else None
+        for name in IMAGES:
+            rec[f"snr_{which}_{name}"] = patch["snr"][name] if patch else None
+    return rec
+
+
+def _banding_columns(task: PointTask, ds: Any) -> dict[str, float]:
+    """Flicker banding of each flickering light at each stage of the pass (NaN where it does
+    not flicker or emit at this point)."""
+    cfg = task.cfg
+    rec: dict[str, float] = {}
+    for name in task.flicker_lights:
+        light = cfg.lights.get(name)
+        nu = folded_cycles_per_line(light.flicker_hz, cfg.timing.line_period_s) if light.emits else 0.0
+        for m in task.stages:
+            amp = float("nan")
+            if light.flickers and light.emits:
+                profile = illumination_profile(
+                    ds["photons"].sel(stage=m).values, ds["reflectance"].sel(stage=m).values
+                )
+                amp = banding_amplitude(profile, nu)
+            rec[banding_column(name, m)] = amp
+    return rec
+
+
+def measure_point(task: PointTask) -> dict[str, Any]:
+    """Run the chain for one point and return its flat record
+    (:data:`~bench_sim.workflows.sweep.plan.COLUMNS` and banding).
+
+    The pass draws from ``task_seed_sequence(root_seed, stream)``; the camera DR from the root
+    ``SeedSequence(root_seed)``, cached per camera in the worker.
+    """
+    cfg = task.cfg
+    mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
+    rng = np.random.default_rng(task_seed_sequence(task.root_seed, task.stream))
+    sim = run_pass(cfg, task.stages, rng, truth=True)
+    offsets = (stage_offset_dn(cfg.sensor, cfg.dtdi, mu1), stage_offset_dn(cfg.sensor, cfg.dtdi, mu2))
+    fused = fuse_dtdi_hdr_eq11(
+        sim.stage_dn[mu1], sim.stage_dn[mu2], mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=offsets
+    )
+    pm = pass_metrics(cfg, sim, fused)
+    rec = _camera_columns(_camera_dr(cfg, task.root_seed, task.dr_levels))
+    rec.update(_scene_columns(pm))
+    rec["mitsuba_renders"] = _renders(sim.setup)
+    lights = cfg.lights
+    if lights.strong.emits and lights.weak.emits:
+        rec["spot_fill_ratio"] = lights.strong.irradiance_w_m2 / lights.weak.irradiance_w_m2
+    rec.update(_banding_columns(task, sim.dataset))
+    return rec
