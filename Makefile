@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup reproduce sweep-example test test-fast install-check lint bench clean
+.PHONY: setup reproduce sweep-example test test-fast docs-test docs-reference install-check lint bench clean
 
 .setup-stamp: pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -28,6 +28,17 @@ lint: setup
 test: lint
 	$(PY) -m pytest
 	bash scripts/check_install.sh
+
+# The documentation alone: README length, every link in README.md and docs/, the config reference
+# against the schema, and the tutorials of docs/tutorials/ executed as notebooks (also in `make test`)
+docs-test: setup
+	$(PY) -m pytest tests/test_docs.py tests/test_tutorials.py
+
+# Regenerate docs/config-reference.md's table from the schema (tests/test_docs.py checks it)
+docs-reference: setup
+	$(PY) -c "import re, pathlib; from bench_sim.workflows.config_cmd import keys_markdown; \
+	p = pathlib.Path('docs/config-reference.md'); t = p.read_text(); \
+	p.write_text(t[:t.index('| key | type |')] + keys_markdown() + '\n')"
 
 # The physics tier alone: closed forms, invariants and seeded statistical tests (under 30 s)
 test-fast: setup

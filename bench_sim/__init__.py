@@ -6,13 +6,16 @@ workflows -> cli``.
 
 The public API:
 
+* :func:`calibrate` - a sensor model fitted to a camera's photon-transfer data or EMVA 1288
+  results, and its predicted DTDI dynamic range (:func:`bench_sim.workflows.calibrate.calibrate`);
 * :func:`simulate` - any bench to its DTDI stage images with exact ground truth
   (:func:`bench_sim.workflows.simulate.simulate`);
 * :func:`run_pass` - one pass, frames -> sensor -> DTDI -> stage images and their truth
   (:func:`bench_sim.pipeline.run_pass`);
 * :func:`load_config` - a bench config from TOML (:func:`bench_sim.config.load_config`);
 * :mod:`dataset` - reading a generated data set: ``bench_sim.dataset.open(DIR)``,
-  ``bench_sim.dataset.iter_samples(DIR)`` (:mod:`bench_sim.workflows.dataset.reader`);
+  ``bench_sim.dataset.iter_samples(DIR)``, ``iter_batches``, ``torch_dataset``
+  (:mod:`bench_sim.workflows.dataset.public`);
 * ``__version__`` - the installed version (:mod:`bench_sim.version`).
 
 The package itself imports nothing: each public name is resolved from its module (the table
@@ -31,15 +34,17 @@ if TYPE_CHECKING:
     from bench_sim.config import load_config
     from bench_sim.pipeline import run_pass
     from bench_sim.version import __version__
-    from bench_sim.workflows.dataset import reader as dataset
+    from bench_sim.workflows.calibrate import calibrate
+    from bench_sim.workflows.dataset import public as dataset
     from bench_sim.workflows.simulate import simulate
 
-__all__ = ["__version__", "dataset", "load_config", "run_pass", "simulate"]
+__all__ = ["__version__", "calibrate", "dataset", "load_config", "run_pass", "simulate"]
 
 #: public name -> (module, attribute; ``None`` for the module itself)
 PUBLIC: dict[str, tuple[str, str | None]] = {
     "__version__": ("bench_sim.version", "__version__"),
-    "dataset": ("bench_sim.workflows.dataset.reader", None),
+    "calibrate": ("bench_sim.workflows.calibrate", "calibrate"),
+    "dataset": ("bench_sim.workflows.dataset.public", None),
     "load_config": ("bench_sim.config", "load_config"),
     "run_pass": ("bench_sim.pipeline", "run_pass"),
     "simulate": ("bench_sim.workflows.simulate", "simulate"),

@@ -7,14 +7,17 @@ itself, ``bench_sim/__init__.py``, runs before this module and imports nothing.)
 
 from __future__ import annotations
 
+import os
 import signal
-import sys
 from typing import Any
 
 
 def _early_interrupt(signum: int, frame: Any) -> None:
-    print("bench-sim: interrupted: stopped by Ctrl-C; nothing was written", file=sys.stderr, flush=True)
-    raise SystemExit(130)
+    # Nothing has been written yet, and an exception raised here would land inside whatever
+    # module is importing (a C extension's initialisation, the import lock held): leave at once,
+    # with one line, without unwinding (no Python code of the interrupted import runs again).
+    os.write(2, b"bench-sim: interrupted: stopped by Ctrl-C during start-up; nothing was written\n")
+    os._exit(130)
 
 
 _PREVIOUS_SIGINT = signal.signal(signal.SIGINT, _early_interrupt)

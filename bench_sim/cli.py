@@ -24,6 +24,7 @@ import contextlib
 import os
 import signal
 import sys
+import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -34,16 +35,19 @@ import typer
 from typer.core import TyperGroup
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, load_config
-from bench_sim.errors import BenchSimError
+from bench_sim.errors import BenchSimError, kept_note
 from bench_sim.fusion.tonemap import TONEMAP_METHODS
 from bench_sim.io import format_bytes
 from bench_sim.runtime.backend import choose_backend, versions
 from bench_sim.runtime.resources import available_memory_bytes
+from bench_sim.workflows import calibrate as calibrate_workflow
+from bench_sim.workflows import config_cmd, ptc_job, render_job, simulate_summary
 from bench_sim.workflows import fuse as fuse_workflow
-from bench_sim.workflows import ptc_job, render_job
+from bench_sim.workflows import mtf as mtf_workflow
 from bench_sim.workflows import simulate as simulate_workflow
 from bench_sim.workflows.dataset import run as dataset_run
 from bench_sim.workflows.reproduce import run as reproduce_run
+from bench_sim.workflows.sweep import export as sweep_export
 from bench_sim.workflows.sweep import run as sweep_run
 
 try:  # typer >= 0.22 carries its own copy of click
@@ -122,15 +126,17 @@ def guarded(func: Callable[[], T]) -> T:
     except BenchSimError as exc:
         if _debug():
             traceback.print_exc()
-        _say("error", str(exc) or type(exc).__name__)
-        raise typer.Exit(EXIT_USER) from None
-    except KeyboardInterrupt:
+        kept = kept_note(exc)
+        _say("error", (str(exc) or type(exc).__name__) + (f"; {kept}" if kept else ""))
+        # a lost cluster (ClusterError) has its own status, 3
+        raise typer.Exit(int(getattr(exc, "exit_status", EXIT_USER))) from None
+    except KeyboardInterrupt as exc:
         if _debug():
             traceback.print_exc()
-        _say("interrupted", f"stopped by Ctrl-C; {_NOTHING_LEFT}")
+        _say("interrupted", f"stopped by Ctrl-C; {kept_note(exc) or _NOTHING_LEFT}")
         raise typer.Exit(EXIT_INTERRUPT) from None
-    except _Terminated:
-        _say("terminated", f"stopped by SIGTERM; {_NOTHING_LEFT}")
+    except _Terminated as exc:
+        _say("terminated", f"stopped by SIGTERM; {kept_note(exc) or _NOTHING_LEFT}")
         raise typer.Exit(EXIT_TERM) from None
     except MemoryError as exc:
         if _debug():
@@ -243,6 +249,8 @@ class _BenchSimGroup(TyperGroup):
 
 app = typer.Typer(
     cls=_BenchSimGroup,
+    # help texts are plain text: "[[parameters]]" and "5:100:5" are not console markup or emoji
+    rich_markup_mode=None,
     add_completion=False,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
@@ -319,19 +327,42 @@ def fuse(
         str, typer.Option("--tra-method", help=" | ".join(TONEMAP_METHODS))
     ] = "log",
     pedestal: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--pedestal",
-            help="offset [DN] the stage words carry (dtdi.pedestal_dn: 64 for bench_sim's images; "
-            "0 for a plain word), subtracted before eq. 11",
+            help="offset [DN] the stage words carry, subtracted before eq. 11 (default: the "
+            "dtdi.pedestal_dn of bench_sim's own images, from their metadata; else 0, a plain word)",
+            show_default=False,
         ),
-    ] = 0.0,
+    ] = None,
 ) -> None:
     """Fuse two stage images with the paper's rule (eq. 11)."""
-    fuse_workflow.fuse_files(
+    meta = fuse_workflow.fuse_files(
         low, high, mu1=mu1, mu2=mu2, beta=beta, out=out, tra=tra, tra_method=tra_method,
         pedestal_dn=pedestal,
     )
+    print(f"pedestal subtracted: {meta['pedestal_source']}; wrote {out}" + (f" and {tra}" if tra else ""))
+
+
+@app.command()
+def mtf(
+    image: Annotated[Path, typer.Argument(help="image with a slanted edge (TIFF/PNG, EXR or NPY), linear")],
+    roi: Annotated[
+        str | None, typer.Option("--roi", help="x0,y0,x1,y1: the edge's region [px, ends exclusive]; "
+                                 "default: the whole image")
+    ] = None,
+    pixel_pitch_um: Annotated[
+        float | None, typer.Option("--pixel-pitch-um", help="pixel pitch [um], for cycles/mm")
+    ] = None,
+    saturation: Annotated[
+        float | None, typer.Option("--saturation", help="value at which the camera clips (default: a "
+                                   "full 8..16-bit word when the ROI reaches one)")
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/mtf"),
+) -> None:
+    """ISO 12233 slanted-edge SFR of an image: sfr.csv, sfr.png and summary.json in DIR."""
+    s = mtf_workflow.run_mtf(image, out=out, roi=roi, pixel_pitch_um=pixel_pitch_um, saturation=saturation)
+    print(mtf_workflow.summary_line(s, out))
 
 
 @app.command()
@@ -340,10 +371,12 @@ def reproduce(
     seed: SeedOpt = 0,
     out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("results/paper"),
     quick: Annotated[bool, typer.Option("--quick", help="small preset for CI and first runs")] = False,
+    seeds: Annotated[int, typer.Option("--seeds", min=1, help="noise seeds (seed, seed+1, ...): headline "
+                                       "numbers as mean +- sd; the files are the first seed's")] = 1,
 ) -> None:
     """Reproduce the paper end to end: Fig. 3, Fig. 4, Table 1, DR analysis, report."""
     cfg = load_config(config)
-    reproduce_run.run_reproduce(cfg, seed=seed, out=out, quick=quick)
+    reproduce_run.run_reproduce(cfg, seed=seed, out=out, quick=quick, seeds=seeds)
 
 
 @app.command()
@@ -356,7 +389,9 @@ def simulate(
 ) -> None:
     """Any bench to its DTDI stage images with exact ground truth (dn, mean_dn, photons,
     reflectance, clipped, hdr): DIR/simulation.zarr, simulation.nc, or TIFFs + meta.json."""
+    start = time.perf_counter()
     simulate_workflow.run_simulate(config, stages=stages, seed=seed, out=out, fmt=fmt)
+    print(simulate_summary.simulate_summary(out, fmt, time.perf_counter() - start))
 
 
 #: the execution layer of ``dataset`` and ``sweep`` (bench_sim.runtime.execution.open_client)
@@ -400,17 +435,47 @@ def dataset(
 @_user_errors
 def sweep(
     spec: Annotated[Path, typer.Argument(help="sweep spec (TOML): base config, [[parameters]], mode, seed")],
-    out: Annotated[Path, typer.Option("--out", help="output folder")],
+    out: Annotated[Path | None, typer.Option("--out", help="output folder")] = None,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="finish a killed sweep: skip its finished points")
     ] = False,
     plots: Annotated[bool, typer.Option("--plots/--no-plots", help="draw DIR/plots/")] = True,
+    export_point: Annotated[
+        tuple[int, Path] | None,
+        typer.Option("--export-point", metavar="I DIR", help="write point I's resolved config.toml (ready "
+                     "for simulate) and point.json into DIR; runs nothing"),
+    ] = None,
 ) -> None:
     """Scenario study: one simulation pass per point of a parameter sweep, on Dask:
-    DIR/points.csv, sweep.nc, plots/, sweep.json, report.md."""
+    DIR/points.csv, points_images.csv, sweep.nc, plots/, sweep.json, report.md."""
+    if export_point is not None:
+        if out is not None:
+            raise BenchSimError("--export-point and --out: give one (--export-point runs nothing)")
+        print(sweep_export.export_point(spec, export_point[0], export_point[1]))
+        return
+    if out is None:
+        raise BenchSimError("--out: missing (the sweep's output folder)")
     sweep_run.run_sweep(spec, out, workers=workers, scheduler=scheduler, resume=resume, plots=plots)
+
+
+@app.command()
+def calibrate(
+    input_path: Annotated[Path, typer.Argument(metavar="INPUT", help=calibrate_workflow.INPUT_HELP)],
+    out: Annotated[Path, typer.Option("--out", help="output folder")],
+    stages: Annotated[str | None, typer.Option("--stages", help="mu1,mu2 (default: the config's)")] = None,
+    config: Annotated[Path | None, typer.Option("--config", help="base config (default: paper rig)")] = None,
+    seed: SeedOpt = 0,
+) -> None:
+    """Digital twin of a camera: EMVA 1288 fit with standard errors, DIR/sensor.toml, and the
+    predicted DTDI dynamic range of mu1, mu2 and Gamma_HDR (report.md)."""
+    calibrate_workflow.calibrate(input_path, out, stages=stages, config=config, seed=seed)
+
+
+# ``bench-sim config keys|show`` and ``bench-sim init`` (their arguments live with the workflow)
+app.add_typer(config_cmd.config_app, name="config")
+app.command("init")(config_cmd.init_command)
 
 
 def main() -> None:  # pragma: no cover

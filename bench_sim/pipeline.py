@@ -9,7 +9,9 @@ dimensions ``stage``, ``line``, ``column``) holds the variables of :data:`PASS_V
 
 =============== ======================================================================
 ``dn``          stage words (``0 .. 2**beta - 1``; uint16 up to beta = 16, else uint32)
-``mean_dn``     exact expectation of ``dn`` before the word clips (fixed patterns in)
+``mean_dn``     exact expectation of ``dn``: full-well, ADC and word clips included
+                (:mod:`bench_sim.sensor.expectation`; fixed patterns in)
+``linear_dn``   the linear model's expectation, no clip (what ``mean_dn`` was before)
 ``photons``     mean photons collected by the stage pixel (its ``m`` rows, smear in)
 ``reflectance`` target reflectance integrated by the pixel's ``m`` footprints
 ``clipped``     a read hit full well or the ADC top, or the word hit ``2**beta - 1``
@@ -45,18 +47,11 @@ from bench_sim.errors import BenchSimError
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.render.exposures import RenderSetup, iter_photon_frames, prepare
 from bench_sim.runtime.parallel import prefetch, seed_sequence
-from bench_sim.sensor.dtdi import frames_needed, full_scale_dn
+from bench_sim.sensor.dtdi import frames_needed
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern
 from bench_sim.sensor.model import word_dtype
-from bench_sim.sensor.stage_truth import (
-    StageSums,
-    reflectance_rows,
-    row_footprints,
-    stage_dark_offset_dn,
-    stage_mean_dn,
-    stage_reflectance,
-)
-from bench_sim.sensor.stream import DEFAULT_CHUNK_FRAMES, Exposed, iter_stream
+from bench_sim.sensor.pass_truth import PassTruth
+from bench_sim.sensor.stream import DEFAULT_CHUNK_FRAMES, iter_stream
 from bench_sim.version import __version__
 
 if TYPE_CHECKING:
@@ -136,8 +131,10 @@ class Variable:
 #: The one table of the pass's variables, in dataset order.
 PASS_VARIABLES: tuple[Variable, ...] = (
     Variable("dn", STAGE_DIMS, WORD, "DN", "DTDI stage word (paper eq. 1-2, 4)"),
-    Variable("mean_dn", STAGE_DIMS, "float64", "DN", "expectation of the stage word before the word clips",
-             truth=True),
+    Variable("mean_dn", STAGE_DIMS, "float64", "DN",
+             "exact expectation of the stage word (full-well, ADC and word clips included)", truth=True),
+    Variable("linear_dn", STAGE_DIMS, "float64", "DN",
+             "expectation of the stage word in the linear model, before any clip", truth=True),
     Variable("photons", STAGE_DIMS, "float64", "photons",
              "mean photons collected by the stage pixel (sum over its m rows)", truth=True),
     Variable("reflectance", STAGE_DIMS, "float32", "1",
@@ -242,67 +239,6 @@ def _pedestal_dn(cfg: BenchConfig) -> float:
 # --- the steps of a pass -------------------------------------------------------------------------
 
 
-class _StageTruth:
-    """The truth of a pass, accumulated chunk by chunk (:mod:`bench_sim.sensor.stage_truth`):
-    ``photons``, ``mean_dn``, ``clipped`` per stage line, ``reflectance`` per band of lines."""
-
-    def __init__(self, cfg: BenchConfig, setup: RenderSetup, fp: FixedPattern, st: tuple[int, ...]) -> None:
-        self.cfg, self.setup, self.st = cfg, setup, st
-        self.lines, n_cols = cfg.lines, cfg.sensor.columns
-        beta, ped = cfg.dtdi.beta_bits, _pedestal_dn(cfg)
-        shape = (len(st), self.lines, n_cols)
-        self.arrays = {v.name: np.empty(shape, dtype=v.array_dtype(beta)) for v in pass_variables(STAGE_DIMS)
-                       if v.truth}
-        self.sums = StageSums(n_cols, st, 3)
-        self.done = dict.fromkeys(st, 0)
-        self.refl_done = 0
-        t_int = setup.geom.t_int_s
-        self.offsets = {
-            m: stage_dark_offset_dn(
-                cfg.sensor, fp, t_int, m, subtract_black=cfg.dtdi.subtract_black, pedestal_dn=ped
-            )
-            for m in st
-        }
-        self.footprints = row_footprints(cfg, setup.geom, setup.grid, st[-1])
-        self.gain = fp.prnu_gain
-
-    def push(self, got: Exposed) -> None:
-        """Add one exposed chunk (its photons and saturated reads)."""
-        photons, mean_dn, clipped = self.arrays["photons"], self.arrays["mean_dn"], self.arrays["clipped"]
-        ph = got.photons
-        stack = np.empty((ph.shape[0], self.st[-1], 3, ph.shape[2]), dtype=np.float64)
-        stack[:, :, 0] = ph
-        np.multiply(ph, self.gain, out=stack[:, :, 1])
-        stack[:, :, 2] = got.saturated
-        for frame in stack:
-            for m, line in self.sums.push(frame).items():
-                s, j = self.st.index(m), self.done[m]
-                if j < self.lines:
-                    photons[s, j] = line[0]
-                    mean_dn[s, j] = stage_mean_dn(line[1], self.cfg.sensor, self.offsets[m])
-                    clipped[s, j] = line[2] > 0
-                    self.done[m] = j + 1
-        complete = min(self.done.values())
-        if complete - self.refl_done >= TRUTH_BAND_LINES or complete == self.lines:
-            self._reflectance_band(complete)
-
-    def _reflectance_band(self, upto: int) -> None:
-        grid, q, refl = self.setup.grid, self.setup.grid.q, self.arrays["reflectance"]
-        start = self.refl_done
-        while start < upto:
-            stop = min(start + TRUTH_BAND_LINES, upto)
-            r0, r1 = reflectance_rows(self.footprints, q, self.st[-1], start, stop)
-            band = grid.rows(r0, r1)
-            for s, m in enumerate(self.st):
-                refl[s, start:stop] = stage_reflectance(band, q, self.footprints, m, start, stop, row0=r0)
-            start = stop
-        self.refl_done = start
-
-    def finish(self, dn_all: np.ndarray) -> None:
-        """Mark the words that hit the top of the word as clipped."""
-        self.arrays["clipped"] |= dn_all >= full_scale_dn(self.cfg.dtdi.beta_bits) - 1
-
-
 def _rendered(setup: RenderSetup, n_rows: int, timings: dict[str, float]) -> Iterator[np.ndarray]:
     """The pass's chunks of photon frames (rows ``0 .. n_rows - 1``), rendered a chunk ahead in
     their own thread (:func:`bench_sim.runtime.parallel.prefetch`)."""
@@ -327,7 +263,7 @@ def _stream(
     fp: FixedPattern,
     noise: np.random.SeedSequence,
     dn: dict[int, np.ndarray],
-    truth: _StageTruth | None,
+    truth: PassTruth | None,
     timings: dict[str, float],
     on_frames: Callable[[int], None] | None,
 ) -> None:
@@ -380,7 +316,7 @@ def _make_dataset(
     setup: RenderSetup,
     st: tuple[int, ...],
     dn_all: np.ndarray,
-    truth: _StageTruth | None,
+    truth: PassTruth | None,
 ) -> xr.Dataset:
     """The pass's :class:`xarray.Dataset` (see the module docstring)."""
     import xarray as xr
@@ -423,6 +359,7 @@ def run_pass(
     *,
     truth: bool = True,
     on_frames: Callable[[int], None] | None = None,
+    fixed_pattern: FixedPattern | None = None,
 ) -> PassResult:
     """Run one simulation pass: render, expose, accumulate stages and truth, fuse.
 
@@ -446,6 +383,10 @@ def run_pass(
         Also compute ``mean_dn``, ``photons``, ``reflectance`` and ``clipped``.
     on_frames
         Called with the number of frames after every rendered chunk (progress bars).
+    fixed_pattern
+        Use this physical sensor (its fixed patterns, shape ``(sensor.rows, sensor.columns)``)
+        instead of the one drawn from ``seed`` (which is still drawn, so the temporal noise is
+        the same): one camera for many passes (a dataset's ``camera = "fixed"``).
     """
     st = check_stages(stages, cfg.sensor.rows)
     rng = np.random.default_rng(seed)  # a Generator is used as is
@@ -456,6 +397,12 @@ def run_pass(
     setup = prepare(cfg, frames_needed(cfg.lines, st), rng)
     timings["render_setup"] = time.perf_counter() - t0
     fixed = draw_fixed_pattern(cfg.sensor, rng)
+    if fixed_pattern is not None:
+        if fixed_pattern.shape != fixed.shape:
+            raise BenchSimError(
+                f"fixed_pattern: shape {fixed_pattern.shape}, the sensor is {fixed.shape} (rows, columns)"
+            )
+        fixed = fixed_pattern
     noise = seed_sequence(rng)
     fp = fixed if n_rows == cfg.sensor.rows else fixed.window(n_rows, n_cols)
     word = VARIABLES_BY_NAME["dn"].array_dtype(cfg.dtdi.beta_bits)
@@ -464,7 +411,9 @@ def run_pass(
     stage_truth = None
     if truth:
         t0 = time.perf_counter()
-        stage_truth = _StageTruth(cfg, setup, fp, st)
+        dtypes = {v.name: v.array_dtype(cfg.dtdi.beta_bits) for v in pass_variables(STAGE_DIMS) if v.truth}
+        stage_truth = PassTruth(cfg, setup, fp, st, dtypes, pedestal_dn=_pedestal_dn(cfg),
+                                band_lines=TRUTH_BAND_LINES)
         timings["truth"] += time.perf_counter() - t0
 
     _stream(cfg, setup, fp, noise, dn, stage_truth, timings, on_frames)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import json
 import re
 import subprocess
 import sys
@@ -150,8 +151,10 @@ def test_public_api() -> None:
         "import sys, bench_sim\n"
         "light = not any(m.startswith('bench_sim.') for m in sys.modules)\n"
         "names = {n: getattr(bench_sim, n) for n in bench_sim.__all__}\n"
-        "print(light, sorted(names), callable(names['simulate']), hasattr(names['dataset'], 'open'))\n"
+        "import json\n"
+        "api = [callable(names['simulate']), hasattr(names['dataset'], 'open')]\n"
+        "print(json.dumps([light, sorted(names), *api]))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.split() == ["True", "['__version__',", "'dataset',", "'load_config',", "'run_pass',",
-                           "'simulate']", "True", "True"]
+    public = ["__version__", "calibrate", "dataset", "load_config", "run_pass", "simulate"]
+    assert json.loads(out) == [True, public, True, True]

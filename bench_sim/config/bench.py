@@ -100,20 +100,28 @@ def config_warnings(cfg: BenchConfig) -> list[str]:
     """Legal but odd settings of ``cfg``, one line each with the numbers (empty if none).
 
     - ``dtdi.beta_bits`` narrower than one pixel: the word's room above the pedestal,
-      ``2**beta - 1 - P``, is less than what one read adds to a stage sum (``2**adc_bits - 1``,
-      less the black offset when it is subtracted), so even stage 1 clips on the word.
+      ``2**beta - 1 - P``, is less than what one read can really add to a stage sum, so even
+      stage 1 clips on the word. One read adds at most ``min(2**adc_bits - 1, K * FW + b)``
+      [DN] (the ADC top, or the full well ``FW`` [e-] converted with the gain ``K`` [DN/e-] above
+      the black offset ``b``, whichever comes first), less ``b`` when it is subtracted; a bench
+      whose pixel saturates below the ADC top is not warned about the ADC's range.
     """
     out: list[str] = []
     s, d = cfg.sensor, cfg.dtdi
     room = d.word_clip_dn - d.pedestal_dn
-    read = s.pixel_saturation_dn - (s.black_offset_dn if d.subtract_black else 0.0)
+    signal_dn = s.conversion_gain_dn_per_e * s.pixel_saturation_electrons  # min(ADC top - b, K FW)
+    read = signal_dn + (0.0 if d.subtract_black else s.black_offset_dn)
     if room < read:
+        by_well = s.full_well_e <= (s.pixel_saturation_dn - s.black_offset_dn) / s.conversion_gain_dn_per_e
+        why = (
+            f"sensor.full_well_e = {s.full_well_e:g} e- x K = {s.conversion_gain_dn_per_e:g} DN/e-"
+            if by_well else f"the top of the {s.adc_bits}-bit ADC, sensor.adc_bits = {s.adc_bits}"
+        )
         out.append(
             f"dtdi.beta_bits = {d.beta_bits}: the word holds {room:g} DN above the {d.pedestal_dn} DN "
-            f"pedestal, less than one pixel read can add ({read:g} DN: sensor.adc_bits = {s.adc_bits}"
+            f"pedestal, less than one pixel read can add ({read:.0f} DN: {why}"
             f"{', black subtracted' if d.subtract_black else ''}): every stage clips on the word at "
             f"{100 * room / read:.0f} % of one pixel's range or less; widen beta_bits to at least "
             f"{math.ceil(math.log2(read + d.pedestal_dn + 1))}"
         )
     return out
-

@@ -16,7 +16,9 @@ A user's config is checked for odd-but-legal settings when it is loaded (:func:`
 
 from __future__ import annotations
 
+import difflib
 import tomllib
+import typing
 import warnings
 from pathlib import Path
 from typing import Any, TypeVar
@@ -24,7 +26,8 @@ from typing import Any, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from bench_sim.config.bench import BenchConfig, config_warnings
-from bench_sim.config.lighting import LIGHT_KINDS
+from bench_sim.config.lighting import LIGHT_KINDS, LightConfig
+from bench_sim.config.plausible import plausibility_error
 from bench_sim.config.serialise import config_to_toml_dict
 from bench_sim.errors import BenchSimError, ConfigWarning
 
@@ -119,8 +122,47 @@ def _lookup(data: Any, loc: tuple[int | str, ...]) -> Any:
     return cur
 
 
+def _model_in(annotation: Any) -> type[BaseModel] | None:
+    """The pydantic model an annotation names (``X``, ``X | None``), else ``None``."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in typing.get_args(annotation):
+        if isinstance(arg, type) and issubclass(arg, BaseModel):
+            return arg
+    return None
+
+
+#: the model of each light kind (the tag pydantic puts in the location of a light's error)
+_LIGHT_MODELS: dict[str, type[BaseModel]] = {
+    m.model_fields["kind"].default: m for m in typing.get_args(LightConfig)
+}
+
+
+def _did_you_mean(model: type[BaseModel] | None, loc: tuple[int | str, ...]) -> str:
+    """``; did you mean 'pixel_pitch_m'?`` for the unknown key at ``loc`` of ``model`` (the
+    closest field name of its table, :func:`difflib.get_close_matches`), else empty."""
+    cur: type[BaseModel] | None = model
+    for part in loc[:-1]:
+        if cur is None or not isinstance(part, str):
+            return ""
+        if part in cur.model_fields:
+            cur = _model_in(cur.model_fields[part].annotation)
+        elif part in _LIGHT_MODELS:
+            cur = _LIGHT_MODELS[part]
+        elif cur.model_config.get("extra") != "allow":
+            return ""
+    if cur is None or not loc or not isinstance(loc[-1], str):
+        return ""
+    close = difflib.get_close_matches(loc[-1], list(cur.model_fields), n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
 def validation_line(
-    exc: ValidationError, data: Any, prefix: str = "", unknown: str = UNKNOWN_CONFIG_KEY
+    exc: ValidationError,
+    data: Any,
+    prefix: str = "",
+    unknown: str = UNKNOWN_CONFIG_KEY,
+    model: type[BaseModel] | None = None,
 ) -> str:
     """The first error of ``exc`` as one line: ``key = value: message``.
 
@@ -134,6 +176,9 @@ def validation_line(
         Dotted key of ``data`` in its file (``randomize.lens.f_number``), put before the key.
     unknown
         What an unknown key is told (``allowed: a, b, c``).
+    model
+        The model validated: an unknown key is then told the closest key of its table
+        (``did you mean 'pixel_pitch_m'?``).
 
     Returns
     -------
@@ -147,7 +192,7 @@ def validation_line(
     key = f"{prefix}{where}" if where.startswith("[") else ".".join(p for p in (prefix, where) if p)
     kind = err.get("type")
     if kind == "extra_forbidden":
-        return f"unknown key '{key}' ({unknown})"
+        return f"unknown key '{key}' ({unknown}{_did_you_mean(model, loc)})"
     if kind == "missing":
         return f"{key}: missing (required)"
     msg = " ".join(str(err.get("msg", "invalid")).removeprefix("Value error, ").split())
@@ -170,7 +215,7 @@ def validate_model(
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(f"{label}: {validation_line(exc, data, prefix, unknown)}") from None
+        raise ConfigError(f"{label}: {validation_line(exc, data, prefix, unknown, model)}") from None
 
 
 def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -209,6 +254,9 @@ def config_from_dict(data: dict[str, Any], source: str = "<dict>", *, warn: bool
     """
     if not isinstance(data, dict):
         raise ConfigError(f"config error: {source}: expected a table of settings, got {type(data).__name__}")
+    slip = plausibility_error(data)  # before the cross-checks, so a slip is named as itself
+    if slip:
+        raise ConfigError(f"config error: {source}: {slip}")
     cfg = validate_model(BenchConfig, data, f"config error: {source}")
     if warn:
         warn_config(cfg, source)

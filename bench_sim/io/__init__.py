@@ -22,6 +22,10 @@ Modules
     CSV files with provenance lines, Markdown tables.
 :mod:`~bench_sim.io.emva_descriptor`
     The EMVA 1288 descriptor file.
+:mod:`~bench_sim.io.folder_lock`
+    One writer per output folder: the advisory lock a long run holds on its ``--out``.
+:mod:`~bench_sim.io.interrupts`
+    Ctrl-C and SIGTERM held back while a step must not be cut in half.
 """
 
 from __future__ import annotations

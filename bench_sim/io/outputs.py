@@ -38,6 +38,7 @@ from bench_sim.io.atomic import (
     write_failure,
 )
 from bench_sim.io.files import format_bytes, write_json
+from bench_sim.io.interrupts import deferred_interrupts
 
 __all__ = [
     "OUTPUT_MARKER",
@@ -225,18 +226,19 @@ def output_set(
         Name of the option or argument for error messages.
     """
     out = check_output_dir(out, what)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        _remove_stale_temporaries(out)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
-    except OSError as exc:
-        raise OutputWriteError(
-            f"{what} = {str(out)!r}: cannot create a folder there ({exc.strerror})"
-        ) from None
-    fd = os.open(tmp, os.O_RDONLY)
-    _lock(fd)
-    _reset_file_count()  # fault points count the files of this set
-    _OPEN_SETS.append(tmp)
+    with deferred_interrupts():  # Ctrl-C here would leave a temporary nobody removes
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            _remove_stale_temporaries(out)
+            tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
+        except OSError as exc:
+            raise OutputWriteError(
+                f"{what} = {str(out)!r}: cannot create a folder there ({exc.strerror})"
+            ) from None
+        fd = os.open(tmp, os.O_RDONLY)
+        _lock(fd)
+        _reset_file_count()  # fault points count the files of this set
+        _OPEN_SETS.append(tmp)
     try:
         yield tmp
         write_json(tmp / OUTPUT_MARKER, dict(record or {}))
@@ -244,7 +246,8 @@ def output_set(
         os.chmod(tmp, 0o777 & ~umask())  # mkdtemp creates 0700
         _replace_set(tmp, out)
     except BaseException as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
+        with deferred_interrupts():  # a second Ctrl-C must not cut the clean-up short
+            shutil.rmtree(tmp, ignore_errors=True)
         failure = write_failure(exc, out, what)
         if failure is not None:
             raise failure from None

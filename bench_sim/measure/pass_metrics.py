@@ -116,6 +116,10 @@ def _bright_patch(
         "gamma1_fraction_of_phi_fs": float(s1[sl].mean() / 2**beta),
         "gamma2_saturated_fraction": float(np.mean(g2[sl] >= clip)),
         "gamma_hdr_saturated_fraction": float(np.mean(fused.saturated[sl])),
+        # eq. 11 keeps Gamma2 where Gamma1 is below its threshold: there Gamma2 may be clipped already
+        "gamma_hdr_from_clipped_gamma2_fraction": float(
+            np.mean((fused.source[sl] == fused.unit_stage) & (g2[sl] >= clip))
+        ),
     }
 
 
@@ -140,7 +144,8 @@ def _qualitative(dark: dict[str, Any], bright: dict[str, Any]) -> dict[str, bool
     return {
         "stage_mu2_saturates_bright_region": bright["gamma2_saturated_fraction"] > 0.99,
         "stage_mu1_leaves_darkest_patch_in_noise": snr_dark["gamma1"] < SNR_IN_NOISE,
-        "hdr_keeps_bright_unsaturated": bright["gamma_hdr_saturated_fraction"] == 0.0,
+        "hdr_keeps_bright_unsaturated": bright["gamma_hdr_saturated_fraction"] == 0.0
+        and bright["gamma_hdr_from_clipped_gamma2_fraction"] == 0.0,
         "hdr_lifts_darkest_patch": snr_dark["gamma_hdr"] >= SNR_ROSE
         and snr_dark["gamma_hdr"] >= 1.8 * snr_dark["gamma1"],
     }

@@ -34,6 +34,7 @@ from typing import Any
 
 from bench_sim.config.variants import check_variant_name, mitsuba_variants
 from bench_sim.errors import BenchSimError
+from bench_sim.io.interrupts import deferred_interrupts
 
 __all__ = [
     "BackendChoice",
@@ -421,10 +422,13 @@ def init_mitsuba(prefer: str = "auto", mode: str = "mono") -> tuple[Any, Backend
             "bench_sim: mitsuba was imported before the backend was chosen", RuntimeWarning, stacklevel=2
         )
     choice = select_backend(prefer, mode)
-    import mitsuba as mi
+    # Ctrl-C is held while the extension loads: an import of Mitsuba/Dr.Jit cut short can abort
+    # the interpreter at exit or leave the import lock held (bench_sim.io.interrupts)
+    with deferred_interrupts():
+        import mitsuba as mi
 
-    if mi.variant() != choice.variant:
-        mi.set_variant(choice.variant)
+        if mi.variant() != choice.variant:
+            mi.set_variant(choice.variant)
     return mi, choice
 
 

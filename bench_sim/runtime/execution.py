@@ -23,18 +23,22 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import logging
 import os
 import time
 import traceback
-import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
 
-from bench_sim.errors import BenchSimError
+from bench_sim.errors import BenchSimError, ClusterError
+from bench_sim.runtime.cluster import (
+    probe_scheduler,
+    quiet_dask_logs,
+    quiet_local_cluster,
+    wait_for_workers,
+)
 from bench_sim.runtime.parallel import child_sequence
 
 __all__ = [
@@ -143,7 +147,7 @@ def _run_one(func: Callable[[Any], Any], index: int, arg: Any) -> TaskOutcome:
 
 @contextlib.contextmanager
 def open_client(
-    workers: int | None = None, scheduler: str | None = None, *, connect_timeout_s: float = 20.0
+    workers: int | None = None, scheduler: str | None = None, *, connect_timeout_s: float | None = None
 ) -> Iterator[Any]:
     """A ``dask.distributed.Client`` for a run; ``None`` for in-process execution.
 
@@ -154,49 +158,66 @@ def open_client(
         :func:`default_workers`). ``0`` runs every task in this process, one after the other
         (no Dask at all: for debugging and for tiny runs).
     scheduler
-        Address of a running scheduler (``tcp://HOST:PORT``); ``workers`` is then ignored.
+        Address of a running scheduler (``tcp://HOST:PORT``); ``workers`` is then ignored. The
+        address is checked, the scheduler's handshake awaited (:mod:`bench_sim.runtime.cluster`)
+        and at least one worker waited for before the client is given.
     connect_timeout_s
-        How long to wait for the scheduler before giving up with a one-line error.
+        How long to wait for the scheduler's handshake [s] before giving up with a one-line
+        error (default: ``BENCH_SIM_CONNECT_TIMEOUT_S``, else 10 s).
+
+    Notes
+    -----
+    The client (and the local cluster) is closed on the way out, however the block ends: no
+    unclosed socket is left for the interpreter to warn about.
     """
     if scheduler is None and workers == 0:
         yield None
         return
-    from distributed import Client, LocalCluster
+    with quiet_dask_logs():
+        yield from _client(workers, scheduler, connect_timeout_s)
 
+
+def _client(workers: int | None, scheduler: str | None, connect_timeout_s: float | None) -> Iterator[Any]:
+    """:func:`open_client`'s body for a cluster (a generator for ``yield from``)."""
     if scheduler is not None:
+        timeout = connect_timeout_s if connect_timeout_s is not None else _env_seconds(
+            "BENCH_SIM_CONNECT_TIMEOUT_S", 10.0)
+        probe_scheduler(scheduler, timeout)
+        from distributed import Client
+
         try:
-            client = Client(scheduler, timeout=f"{connect_timeout_s}s")
-        except (OSError, TimeoutError) as exc:
+            client = Client(scheduler, timeout=f"{timeout}s")
+        except (OSError, TimeoutError, ValueError) as exc:
             raise BenchSimError(
                 f"--scheduler = {scheduler!r}: cannot reach a Dask scheduler there ({_one_line(exc)})"
             ) from None
         try:
+            wait_s = _env_seconds("BENCH_SIM_WORKER_WAIT_S", 120.0)
+            wait_for_workers(client, scheduler, grace_s=min(10.0, wait_s), timeout_s=wait_s)
             yield client
         finally:
-            client.close()
+            with contextlib.suppress(Exception):
+                client.close(timeout=10)
         return
     n = default_workers() if workers is None else int(workers)
     if n < 0:
         raise BenchSimError(f"--workers = {n}: must be >= 0 (0 runs in this process)")
-    with warnings.catch_warnings():
-        # the scheduler's HTTP endpoints fall back to a free port when 8787 is taken (another
-        # cluster on the machine): nothing the user needs to act on
-        warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.ERROR,
-            # one core per worker: the chain's own thread pools use one thread in a worker
-            env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
-        )
-    client = Client(cluster)
-    try:
+    with quiet_local_cluster(n) as client:
         yield client
-    finally:
-        client.close()
-        cluster.close()
+
+
+def _env_seconds(name: str, default: float) -> float:
+    """A duration [s] from the environment variable ``name`` (a positive number), else ``default``."""
+    text = os.environ.get(name)
+    if not text:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not value > 0:
+        raise BenchSimError(f"{name} = {text!r}: needs a number of seconds > 0")
+    return value
 
 
 def run_tasks(
@@ -258,10 +279,21 @@ def run_tasks(
     pending = as_completed(client.map(_run_one, [func] * len(args), idx, list(args), pure=False))
     try:
         for fut in pending:  # only ``pending`` holds the futures not yet done
-            out = fut.result()
+            try:
+                out = fut.result()  # a task's own exception is already an outcome (_run_one)
+            except Exception as exc:  # so this is the cluster: the scheduler or the connection lost
+                why = _one_line(exc)
+                if "reason:" in why:  # "... cancelled for reason: scheduler-connection-lost."
+                    why = why.rsplit("reason:", 1)[1].strip(" .")
+                raise ClusterError(
+                    f"lost the Dask cluster during the run ({why or 'connection lost'}); "
+                    f"{len(outcomes)} of {len(idx)} tasks had finished"
+                ) from None
             fut.release()  # the worker may drop the result now
             record(out)
     except BaseException:
-        client.cancel(list(pending.futures))
+        if getattr(client, "status", None) == "running":
+            with contextlib.suppress(Exception):
+                client.cancel(list(pending.futures))
         raise
     return [outcomes[i] for i in idx]

@@ -49,6 +49,7 @@ from bench_sim.runtime.resources import check_resources
 from bench_sim.sensor.model import check_beta_bits
 from bench_sim.version import __version__
 from bench_sim.workflows.estimates import estimate_fuse
+from bench_sim.workflows.pedestal import default_pedestal_dn
 
 __all__ = ["fuse_files", "check_stage_image"]
 
@@ -234,7 +235,7 @@ def fuse_files(
     out: str | os.PathLike[str],
     tra: str | os.PathLike[str] | None = None,
     tra_method: str = "log",
-    pedestal_dn: float = 0.0,
+    pedestal_dn: float | None = None,
 ) -> dict[str, Any]:
     """Read two stage images, fuse them with eq. 11, write the HDR EXR (and ``Gamma_TRA`` PNG).
 
@@ -257,7 +258,10 @@ def fuse_files(
     pedestal_dn
         Offset [DN] both stage words carry besides the signal (``--pedestal``): the DTDI
         pedestal, ``dtdi.pedestal_dn`` for images made by bench_sim (64 DN by default; their
-        metadata names it); ``0`` for a plain word. It is subtracted before eq. 11.
+        metadata names it); ``0`` for a plain word. It is subtracted before eq. 11. ``None``
+        (the default): the ``dtdi.pedestal_dn`` the inputs' bench_sim metadata name, else 0
+        (:func:`bench_sim.workflows.pedestal.default_pedestal_dn`); the returned
+        ``pedestal_source`` says which.
 
     Returns
     -------
@@ -271,6 +275,10 @@ def fuse_files(
     """
     low_p, high_p, out_p = Path(low), Path(high), Path(out)
     tra_p = Path(tra) if tra is not None else None
+    if pedestal_dn is None:
+        pedestal_dn, pedestal_source = default_pedestal_dn(low_p, high_p)
+    else:
+        pedestal_source = f"{pedestal_dn:g} DN (--pedestal)"
     beta, mu1, mu2 = _check_options(beta, mu1, mu2, tra_method, pedestal_dn)
     _check_outputs(low_p, high_p, out_p, tra_p)
     # sizes from the headers, before decoding anything
@@ -281,5 +289,6 @@ def fuse_files(
     result = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=float(pedestal_dn))
     display = gamma_tra(result.hdr, tra_method, full_scale_dn=result.full_scale_dn) if tra_p else None
     meta = _hdr_meta({"low": (low_p, g1), "high": (high_p, g2)}, result, mu1, mu2, beta, pedestal_dn)
+    meta["pedestal_source"] = pedestal_source
     _write_outputs(out_p, tra_p, result, meta, tra_method, display)
     return {**meta, "out": str(out_p), "tra": str(tra_p) if tra_p else None}

@@ -19,9 +19,10 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import overload
+from typing import Annotated, Any, overload
 
 import numpy as np
+from pydantic import BeforeValidator
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
@@ -32,18 +33,38 @@ from bench_sim.runtime.backend import select_backend
 from bench_sim.runtime.resources import ResourceEstimate, check_resources, local_concurrency
 from bench_sim.workflows.estimates import estimate_simulate, estimate_tasks
 
-__all__ = ["preflight", "preflight_tasks", "check_seed", "SEED_MAX"]
+__all__ = ["preflight", "preflight_tasks", "check_seed", "is_seed", "SeedField", "SEED_MAX", "SEED_RULE"]
 
 #: The largest root seed: seeds are stored as signed 64-bit integers (Zarr, NetCDF attributes).
 SEED_MAX = 2**63 - 1
 
 
+#: What a root seed may be, for messages
+SEED_RULE = "an integer in 0..2**63-1"
+
+
+def is_seed(seed: object) -> bool:
+    """Whether ``seed`` is a valid root seed: an integer (not a bool) in ``0 .. 2**63 - 1``.
+    The one rule of every seed: ``--seed``, a sweep or dataset spec's ``seed``."""
+    return not isinstance(seed, bool) and isinstance(seed, int | np.integer) and 0 <= int(seed) <= SEED_MAX
+
+
+def _seed_value(value: Any) -> Any:
+    if not is_seed(value):
+        raise ValueError(f"must be {SEED_RULE}")
+    return value
+
+
+#: A spec file's root seed as a pydantic field type: :func:`is_seed` on the value as written
+SeedField = Annotated[int, BeforeValidator(_seed_value)]
+
+
 def check_seed(seed: object, what: str = "--seed") -> int:
-    """A root seed: an integer in ``0 .. 2**63 - 1`` (:data:`SEED_MAX`). Raises
-    :class:`~bench_sim.errors.BenchSimError` naming ``what`` otherwise."""
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= int(seed) <= SEED_MAX:
-        raise BenchSimError(f"{what} = {seed!r}: must be an integer in 0..2**63-1")
-    return int(seed)
+    """A root seed (:func:`is_seed`). Raises :class:`~bench_sim.errors.BenchSimError` naming
+    ``what`` otherwise."""
+    if not is_seed(seed):
+        raise BenchSimError(f"{what} = {seed!r}: must be {SEED_RULE}")
+    return int(seed)  # type: ignore[call-overload]
 
 
 @overload

@@ -13,6 +13,8 @@ Files (DIR, written as one set)
   16-bit TIFF, so ``dtdi.beta_bits > 16`` is refused with a clear error.
 * ``ptc_results.json``: per stage K, QE, dark temporal noise, saturation capacity, SNR curve,
   dynamic range, DSNU and PRNU (measured and model), the series.
+* ``stage_MMM/ptc_table.csv``: the stage's photon-transfer table in the format ``bench-sim
+  calibrate`` reads (:mod:`bench_sim.workflows.calibrate_inputs`).
 * ``ptc_levels.csv`` (every level of every stage), ``ptc_summary.csv`` (one row per stage).
 * ``ptc.png`` (photon transfer: variance vs mean), ``snr.png`` (SNR vs photons per frame).
 
@@ -196,6 +198,21 @@ def _level_rows(plan: PtcPlan, results: dict[int, StageResult]) -> list[list[Any
     return rows
 
 
+#: Columns of ``stage_MMM/ptc_table.csv``: the photon-transfer table ``bench-sim calibrate`` reads.
+TABLE_COLUMNS = ("exposure_s", "photons_per_pixel", "mean_dn", "var_dn2", "pixels", "bits")
+
+
+def _table_rows(cfg: BenchConfig, m: int, plan: PtcPlan, r: StageResult) -> list[list[Any]]:
+    """Stage ``m``'s photon-transfer table (the dark level first; photons summed over the stage's
+    ``m`` frames; exposure ``m t_int``; the word's bits)."""
+    t = m * cfg.timing.t_int_s
+    px, bits = plan.lines * plan.columns, cfg.dtdi.beta_bits
+    rows: list[list[Any]] = [[t, 0.0, r.dark_mean_dn, r.dark_var_dn2, px, bits]]
+    for p, mean, var in zip(m * r.photons_per_frame, r.mean_dn, r.var_dn2, strict=True):
+        rows.append([t, float(p), float(mean), float(var), px, bits])
+    return rows
+
+
 def _summary_rows(results: dict[int, StageResult]) -> list[list[Any]]:
     """``ptc_summary.csv``'s rows: one per stage."""
     rows = []
@@ -223,6 +240,9 @@ def write_ptc(
         for m in plan.stages:
             _write_stage(tmp / f"stage_{m:03d}", cfg, m, plan, images, img_meta)
             files.append(f"stage_{m:03d}/emva1288.txt")
+            write_csv(tmp / f"stage_{m:03d}" / "ptc_table.csv", list(TABLE_COLUMNS),
+                      _table_rows(cfg, m, plan, results[m]), img_meta)
+            files.append(f"stage_{m:03d}/ptc_table.csv")
         write_csv(
             tmp / "ptc_levels.csv",
             ["stage", "level", "photons_per_frame", "photons", "mean_dn", "var_dn2", "signal_dn", "snr"],

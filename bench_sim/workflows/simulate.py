@@ -23,6 +23,7 @@ import numpy as np
 from bench_sim.config import BenchConfig, load_config, warn_config, with_overrides
 from bench_sim.errors import BenchSimError
 from bench_sim.io import output_set, write_json
+from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges, sharpness_summary
 from bench_sim.pipeline import (
     IMAGE_DIMS,
     PASS_VARIABLES,
@@ -92,14 +93,18 @@ def simulate(
     xarray.Dataset
         Dimensions ``stage``, ``line``, ``column``; variables ``dn``, ``mean_dn``, ``photons``,
         ``reflectance``, ``clipped`` and, when ``fusion.mu1`` and ``fusion.mu2`` are among the
-        stages, ``gamma_hdr`` and ``gamma_hdr_source`` (see the module docstring).
+        stages, ``gamma_hdr`` and ``gamma_hdr_source`` (see the module docstring). With a
+        ``slanted_edges`` target also the ISO 12233 e-SFR along and across the track of every
+        stage and of ``gamma_hdr``: ``sfr_along``, ``sfr_across`` (stage, sfr_frequency),
+        ``mtf50_along``, ``mtf50_across`` (stage) [cycles/px], ``gamma_hdr_sfr_*`` and
+        ``gamma_hdr_mtf50_*`` (:func:`bench_sim.measure.sharpness.add_sharpness`).
     """
     cfg = resolve_config(config)
     st = check_stages(stages, cfg.sensor.rows)
     seed = check_seed(seed, "seed")
     check_inputs(cfg, st)
     if not progress:
-        return run_pass(cfg, st, int(seed)).dataset
+        return _with_sharpness(run_pass(cfg, st, int(seed)).dataset, cfg)
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     with Progress(
@@ -110,7 +115,14 @@ def simulate(
         TimeRemainingColumn(),
     ) as bar:
         task = bar.add_task("pass", total=frames_needed(cfg.lines, st))
-        return run_pass(cfg, st, int(seed), on_frames=lambda n: bar.update(task, advance=n)).dataset
+        ds = run_pass(cfg, st, int(seed), on_frames=lambda n: bar.update(task, advance=n)).dataset
+    return _with_sharpness(ds, cfg)
+
+
+def _with_sharpness(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
+    """The pass's dataset with the e-SFR of every stage and of ``gamma_hdr`` along and across the
+    track when the target has slanted edges (:func:`bench_sim.measure.sharpness.add_sharpness`)."""
+    return add_sharpness(ds, cfg) if has_slanted_edges(cfg) else ds
 
 
 def check_inputs(
@@ -168,7 +180,8 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
     ``netcdf``: ``simulation.nc``; ``tiff``: one 32-bit TIFF per stage and variable,
     ``stage_MMM_VARIABLE.tiff`` (integer and boolean variables uint32, the others float32), ``gamma_hdr.tiff``
     and ``gamma_hdr_source.tiff`` when fused, each with its units and the provenance as JSON in the
-    ImageDescription tag, plus ``meta.json`` (provenance, units, file list).
+    ImageDescription tag, plus ``meta.json`` (provenance, units, file list and, with slanted
+    edges, the MTF50s of :func:`bench_sim.measure.sharpness.sharpness_summary`).
     """
     if fmt == "zarr":
         with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
@@ -198,7 +211,8 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
     for var in pass_variables(IMAGE_DIMS):
         if var.name in ds:
             put(f"{var.name}.tiff", ds[var.name].values, var, None)
-    write_json(folder / "meta.json", {**meta, "files": files, "dims": ["line", "column"]})
+    sharp = sharpness_summary(ds)  # the MTF50s of a slanted-edge target (none otherwise)
+    write_json(folder / "meta.json", {**meta, "files": files, "dims": ["line", "column"], **sharp})
     return [*files, "meta.json"]
 
 

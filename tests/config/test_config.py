@@ -27,7 +27,7 @@ def test_presets_load_and_differ_only_in_lights():
         ("[sensor]\nbogus = 1\n", "unknown key 'sensor.bogus'"),
         ("[fusion]\nmu1 = 80\nmu2 = 10\n", "mu1 = 80 must be smaller than mu2 = 10"),
         ("[lens]\nmodel = 'fisheye'\n", "lens.model = 'fisheye'"),
-        ("[timing]\nintegration_time_s = 1.0\n", "must not exceed line_period_s"),
+        ("[timing]\nintegration_time_s = 0.05\n", "must not exceed line_period_s"),
         ("[sensor]\nrows = [\n", "not valid TOML"),
         ("base = 'nope.toml'\n", "nope.toml: no such file"),
     ],
@@ -53,12 +53,15 @@ def test_base_chain_overrides(tmp_path):
 @pytest.mark.parametrize(
     ("dtdi", "warns"),
     [
-        ({"beta_bits": 12}, False),  # the paper: 4031 DN of room, one read adds up to 1003 DN
+        ({"beta_bits": 12}, False),  # the paper: 4031 DN of room, one read adds up to 972 DN (K FW)
         ({"beta_bits": 11}, False),  # 1983 DN of room
         ({"beta_bits": 10}, True),  # 959 DN of room above the 64 DN pedestal: less than one read
         ({"beta_bits": 10, "pedestal_dn": 0}, False),  # 1023 DN
         ({"beta_bits": 10, "pedestal_dn": 0, "subtract_black": False}, False),  # a read adds 1023 DN
-        ({"beta_bits": 10, "pedestal_dn": 1, "subtract_black": False}, True),
+        # a read adds at most K FW + b = 992 DN (the full well comes before the ADC top, 1023 DN)
+        ({"beta_bits": 10, "pedestal_dn": 1, "subtract_black": False}, False),
+        ({"beta_bits": 10, "pedestal_dn": 40, "subtract_black": False}, True),  # 983 DN < 992 DN
+        ({"beta_bits": 10, "pedestal_dn": 40}, False),  # 983 DN >= 972 DN: nothing clips on the word
         ({"beta_bits": 8}, True),
     ],
 )

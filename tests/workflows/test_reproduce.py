@@ -5,12 +5,13 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from bench_sim.cli import app
 from bench_sim.config import load_config, with_overrides
-from bench_sim.io import read_png_text
+from bench_sim.io import read_image, read_png_text
 from bench_sim.workflows.reproduce.run import run_reproduce
 
 runner = CliRunner()
@@ -26,11 +27,15 @@ FILES = (
     "metrics.json",
     "report.md",
     "snr_vs_signal.png",
+    "gamma_hdr_error.png",
+    "tdi_light_ratio.png",
+    "mtf50_vs_stage.png",
+    "mtf50_vs_stage.csv",
 )
 KEYS = (
     "mu1", "mu2", "beta", "delta_psi_db_eq15", "stage_pairs_26_02_db", "dr_db",
     "delta_dr_db_vs_gamma1", "delta_dr_db_vs_gamma2", "omega", "eq18_holds",
-    "saturated_fraction", "seed", "config_sha256", "version", "wall_s",
+    "saturated_fraction", "seed", "config_sha256", "version", "wall_s", "fusion_truth",
 )
 
 
@@ -60,9 +65,31 @@ def test_quick_writes_every_file_and_key(quick_runs):
     assert m["stage_pairs_26_02_db"] == [[5, 100]]
     report = (out / "report.md").read_text()
     assert "18.06 dB" in report and "26.02" in report and "eq. 18" in report
-    assert f"Gain over the better input, Gamma1: {m['delta_dr_db_vs_gamma1']:.2f} dB" in report
+    gain1 = m["delta_dr_db_vs_gamma1"]
+    assert f"Gain over the better input (by measured DR), Gamma1: {gain1:.2f} dB" in report
     assert "*by construction*" in report and m["gain_over_gamma2_by_construction"]
     assert read_png_text(out / "snr_vs_signal.png")["seed"] == 7
+
+
+def test_pixels_from_a_clipped_gamma2_agree_with_the_tiffs(quick_runs):
+    """On the default rig some Gamma_HDR pixels come from a clipped Gamma2: the fraction in
+    metrics.json is > 0 and equals a count made from gamma1.tiff and gamma2.tiff by eq. 11."""
+    out = quick_runs[0]
+    m = json.loads((out / "metrics.json").read_text())
+    g1 = read_image(out / "gamma1.tiff").astype(np.float64)
+    g2 = read_image(out / "gamma2.tiff").astype(np.float64)
+    off1, off2 = (m["stage_offset_dn"][k] for k in ("gamma1", "gamma2"))
+    top = 2 ** m["beta"] - 1
+    # eq. 11: Gamma2 where Gamma1's prediction stays inside the word
+    from_g2 = (g1 - off1) * m["mu2"] <= (2 ** m["beta"] - off2) * m["mu1"]
+    count = float(np.mean(from_g2 & (g2 >= top)))
+    eq11 = m["fusion_truth"]["rules"]["eq11"]
+    assert eq11["from_word_top_fraction"] > 0
+    assert count == pytest.approx(eq11["from_word_top_fraction"], abs=2.0 / g1.size)
+    assert eq11["from_clipped_fraction"] >= eq11["from_word_top_fraction"]
+    report = (out / "report.md").read_text()
+    assert f"{eq11['from_clipped_fraction']:.2%} of Gamma_HDR's pixels" in report
+    assert "Gamma_HDR keeps the bright detail: 0.0%" not in report
 
 
 def _keys(x) -> set:
@@ -163,6 +190,19 @@ def test_report_states_what_this_run_measured(tmp_path, overrides, clips_on_word
     if (mu1, mu2) != (10, 80):
         assert "18.06" not in report  # nothing of the default stage pair is left in the text
     assert f"stage {mu2} saturates the brightly lit region" in report
+    # the better input is the one with the higher measured DR, and the gain is over it
+    better = "gamma1" if m["dr_db"]["gamma1"] >= m["dr_db"]["gamma2"] else "gamma2"
+    gain = m[f"delta_dr_db_vs_{better}"]
+    name = better.replace("g", "G", 1)
+    assert f"Gain over the better input (by measured DR), {name}: {gain:.2f} dB" in report
+    if overrides.get("dtdi", {}).get("beta_bits") == 16:
+        assert better == "gamma2"  # a 16-bit word: stage 80's DR exceeds stage 10's
+    # never "0 %" from a clipped Gamma2 where the truth counts some
+    eq11 = m["fusion_truth"]["rules"]["eq11"]
+    if eq11["from_clipped_pixels"]:
+        assert f"{eq11['from_clipped_fraction']:.2%} of Gamma_HDR's pixels" in report
+    else:
+        assert "No Gamma_HDR pixel is taken from a clipped stage" in report
     sat2 = m["saturated_fraction"]["gamma2"]
     assert (f"whose {sat2:.0%} saturated pixels" in report) == (sat2 > 0)
     table = report.split("| qualitative result")[1].split("\n\n")[0].splitlines()[2:]

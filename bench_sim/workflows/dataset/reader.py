@@ -5,14 +5,19 @@
   randomised values, the summary metrics) as coordinates along ``sample``.
 - :func:`iter_samples` ``(DIR)`` -> one :class:`Sample` at a time: numpy arrays and the
   sample's parameters and metrics, without xarray.
+- For training: ``bench_sim.dataset.iter_batches`` / ``torch_dataset`` by split
+  (:mod:`bench_sim.workflows.dataset.loaders`).
 
 Layout of ``DIR`` (the writer is :mod:`bench_sim.workflows.dataset.run`):
 
 =========================== =====================================================================
 ``data.zarr``               Zarr v3: ``dn``, ``mean_dn``, ``photons``, ``reflectance``,
-                            ``clipped`` (``sample, stage, line, column``), ``gamma_hdr`` and
-                            ``gamma_hdr_source`` (``sample, line, column``) when two stages are fused;
-                            one chunk per sample and stage; ``units`` on every array
+                            ``clipped``, ``noise_std_dn`` (``sample, stage, line, column``),
+                            ``gamma_hdr``, ``gamma_hdr_source``, ``gamma_hdr_truth``
+                            (``sample, line, column``) when two stages are fused; truth in
+                            float32; one chunk per sample and stage; ``units``, ``long_name``,
+                            ``pedestal_included`` on every array; physical coordinates
+                            (:mod:`bench_sim.workflows.dataset.coordinates`)
 ``samples/NNNNNNNN.json``   one record per finished sample, written after its arrays are on
                             disk: status (``complete`` / ``failed``), values, metrics, time
                             (the journal of :mod:`bench_sim.runtime.journal`)
@@ -40,8 +45,10 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError
 from bench_sim.io import OUTPUT_MARKER
-from bench_sim.pipeline import IMAGE_DIMS, STAGE_DIMS, pass_variables
+from bench_sim.pipeline import IMAGE_DIMS, STAGE_DIMS, VARIABLES_BY_NAME, pass_variables
 from bench_sim.runtime.journal import Journal
+from bench_sim.workflows.dataset.splits import DEFAULT_SPLITS, split_of
+from bench_sim.workflows.dataset.targets import EXTRA_FUSED_VARIABLES, EXTRA_STAGE_VARIABLES
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -61,6 +68,7 @@ __all__ = [
     "DATASET_KIND",
     "STAGE_VARIABLES",
     "FUSED_VARIABLES",
+    "variable_meta",
     "journal",
     "record_path",
     "read_info",
@@ -81,11 +89,34 @@ COMPLETION_RECORD = OUTPUT_MARKER
 #: ``kind`` of ``dataset.json``: how a folder is recognised as a bench_sim dataset
 DATASET_KIND = "bench_sim dataset"
 
+
+
+def _stored(dtype: str) -> str:
+    """The dataset's dtype of a pass variable: the truth in float32 (half the bytes; its
+    relative precision 6e-8 is far below any noise it is compared with)."""
+    return "float32" if dtype == "float64" else dtype
+
+
 #: variables with dimensions (sample, stage, line, column) -> dtype (from
-#: :data:`bench_sim.pipeline.PASS_VARIABLES`, as are those below)
-STAGE_VARIABLES: dict[str, str] = {v.name: v.stored_dtype for v in pass_variables(STAGE_DIMS)}
+#: :data:`bench_sim.pipeline.PASS_VARIABLES`, float64 stored as float32, and the training
+#: targets of :mod:`bench_sim.workflows.dataset.targets`, as are those below)
+STAGE_VARIABLES: dict[str, str] = {
+    **{v.name: _stored(v.stored_dtype) for v in pass_variables(STAGE_DIMS)},
+    **{name: meta[0] for name, meta in EXTRA_STAGE_VARIABLES.items()},
+}
 #: variables with dimensions (sample, line, column), present when two stages are fused -> dtype
-FUSED_VARIABLES: dict[str, str] = {v.name: v.stored_dtype for v in pass_variables(IMAGE_DIMS)}
+FUSED_VARIABLES: dict[str, str] = {
+    **{v.name: _stored(v.stored_dtype) for v in pass_variables(IMAGE_DIMS)},
+    **{name: meta[0] for name, meta in EXTRA_FUSED_VARIABLES.items()},
+}
+
+
+def variable_meta(name: str) -> tuple[str, str]:
+    """(units, long name) of a dataset variable."""
+    extra = {**EXTRA_STAGE_VARIABLES, **EXTRA_FUSED_VARIABLES}
+    if name in extra:
+        return extra[name][1], extra[name][2]
+    return VARIABLES_BY_NAME[name].units, VARIABLES_BY_NAME[name].doc
 
 
 def journal(folder: str | Path) -> Journal:
@@ -168,17 +199,20 @@ def open(folder: str | Path, *, incomplete: bool = False) -> xr.Dataset:
     import xarray as xr
 
     folder = Path(folder)
-    _, done = _selection(folder, incomplete, None)
+    info, done = _selection(folder, incomplete, None)
     ds = xr.open_zarr(folder / DATA_STORE, consolidated=True)
     ds = ds.sel(sample=done)
     records = read_records(folder)
     table = [
-        {**r.get("values", {}), "config_sha256": r.get("config_sha256"), **r.get("metrics", {}),
+        {**r.get("values", {}), "config_sha256": r.get("config_sha256"),
+         **{k: np.nan if v is None else v for k, v in r.get("metrics", {}).items()},
          "wall_s": r.get("wall_s")}
         for r in (records[i] for i in done)
     ]
     for key in dict.fromkeys(k for row in table for k in row):
         ds.coords[key] = ("sample", np.asarray([row.get(key) for row in table]))
+    splits = info.get("splits") or DEFAULT_SPLITS
+    ds.coords["split"] = ("sample", np.asarray([split_of(int(info["seed"]), i, splits) for i in done]))
     return ds
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,8 +41,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bench_sim.config import BenchConfig, config_sha256
-from bench_sim.errors import BenchSimError
+from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import check_free_space, format_bytes, write_json
+from bench_sim.io.folder_lock import folder_lock
 from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
 from bench_sim.pipeline import run_pass
 from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
@@ -57,6 +59,7 @@ from bench_sim.workflows.dataset.reader import (
     read_records,
 )
 from bench_sim.workflows.dataset.spec import DatasetSpec, check_sample_configs, load_spec, sample_streams
+from bench_sim.workflows.dataset.splits import split_of
 from bench_sim.workflows.dataset.store import (
     bytes_per_sample,
     check_folder,
@@ -66,6 +69,7 @@ from bench_sim.workflows.dataset.store import (
     manifest_meta,
     write_manifest,
 )
+from bench_sim.workflows.dataset.targets import fixed_camera, recorded_values, strict_json, training_targets
 from bench_sim.workflows.preflight import preflight_tasks
 
 if TYPE_CHECKING:
@@ -95,6 +99,7 @@ class SampleTask:
     config: BenchConfig
     stages: tuple[int, ...]
     stream: np.random.SeedSequence
+    camera_seed: int | None = None  # camera = "fixed": the dataset's root seed (targets.fixed_camera)
 
 
 @dataclass
@@ -146,9 +151,12 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
 
 def make_sample(task: SampleTask) -> SampleOutput:
     """Make one sample (runs in a worker): one pass with truth, its arrays and metrics."""
-    res = run_pass(task.config, task.stages, np.random.default_rng(task.stream), truth=True)
+    camera = None if task.camera_seed is None else fixed_camera(task.config, task.camera_seed)
+    res = run_pass(task.config, task.stages, np.random.default_rng(task.stream), truth=True,
+                   fixed_pattern=camera)
     ds = res.dataset
     arrays = {v: np.asarray(ds[v].values) for v in (*STAGE_VARIABLES, *FUSED_VARIABLES) if v in ds}
+    arrays.update(training_targets(ds, task.config))
     info = {
         "config_sha256": config_sha256(task.config),
         **{k: ds.attrs[k] for k in ("engine", "variant", "t_int_s", "frames")},
@@ -228,6 +236,21 @@ def _check_options(
         raise BenchSimError("--resume and --only: give one (--only remakes just the samples named)")
 
 
+def _own_complete(out: Path, spec: DatasetSpec) -> set[int]:
+    """The complete samples of ``out`` whose record names this spec and seed; the others (another
+    spec's or seed's, or a record without them) are recomputed, with one warning counting them."""
+    own, foreign = set(), 0
+    for i, rec in read_records(out).items():
+        if rec.get("spec_sha256") != spec.identity() or rec.get("seed") != spec.seed:
+            foreign += 1
+        elif rec.get("status") == "complete":
+            own.add(i)
+    if foreign:
+        warnings.warn(f"bench_sim: {out}: {foreign} sample records of another spec or seed: recomputed",
+                      RuntimeWarning, stacklevel=3)
+    return own
+
+
 def _plan(
     spec_path: str | Path, out: str | Path, workers: int | None, scheduler: str | None, resume: bool,
     only: Sequence[int] | None,
@@ -238,16 +261,15 @@ def _plan(
     only_idx = _parse_only(only, spec.samples)
     out = Path(out).expanduser().resolve()
     action = check_folder(spec, out, reuse=resume or only_idx is not None)
-    done_before = set() if action == "create" else {
-        i for i, r in read_records(out).items() if r.get("status") == "complete"
-    }
+    done_before = set() if action == "create" else _own_complete(out, spec)
     todo = only_idx if only_idx is not None else [i for i in range(spec.samples) if i not in done_before]
     per = bytes_per_sample(len(spec.stages), spec.base.lines, spec.base.sensor.columns, spec.fused)
     check_free_space(
         out, estimate_bytes(spec, len(todo)),
         detail=f"{len(todo)} samples x {format_bytes(per)} uncompressed + records and card",
     )
-    values = [spec.draw(i) for i in range(spec.samples)]
+    # target.image drawn for a sample whose layout uses none: null in its config and record
+    values = [recorded_values(spec.draw(i), spec.base.target.layout) for i in range(spec.samples)]
     planned = check_sample_configs(spec, {i: values[i] for i in todo})
     preflight_tasks(  # memory of the samples running at once here, the backend (disk: above)
         "dataset", [(planned[i], spec.stages) for i in todo], out=out, workers=workers,
@@ -260,7 +282,9 @@ def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool)
     """Make the samples to do, writing each as it completes; the manifest of what is on disk
     is written if the run stops (Ctrl-C, a lost scheduler)."""
     spec, todo = plan.spec, plan.todo
-    tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1]) for i in todo]
+    camera_seed = spec.seed if spec.camera == "fixed" else None
+    tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1], camera_seed)
+             for i in todo]
     skipped = spec.samples - len(todo)
     note = f"({skipped} already complete)" if skipped else ""
     with progress_bar("dataset", len(todo), "samples", enabled=progress, note=note) as bar:
@@ -308,6 +332,18 @@ def run_dataset(
     """
     t_start = time.perf_counter()
     _check_options(workers, scheduler, resume, only)
+    # one writer per folder: held from before the folder is read until its last file is written
+    with folder_lock(Path(out).expanduser().resolve(), "dataset"):
+        run = _plan_and_run(spec_path, out, workers, scheduler, resume, only, progress, command)
+    run.wall_s = time.perf_counter() - t_start
+    return run
+
+
+def _plan_and_run(
+    spec_path: str | Path, out: str | Path, workers: int | None, scheduler: str | None, resume: bool,
+    only: Sequence[int] | None, progress: bool, command: str | None,
+) -> DatasetRun:
+    """:func:`run_dataset` under the folder's lock."""
     plan = _plan(spec_path, out, workers, scheduler, resume, only)
     spec, out = plan.spec, plan.out
     run = DatasetRun(out=out, samples=spec.samples)
@@ -322,7 +358,13 @@ def run_dataset(
         if not plan.todo:
             run.complete = len(plan.done_before)
         else:
-            writer = _run_samples(plan, client, meta, progress)
+            try:
+                writer = _run_samples(plan, client, meta, progress)
+            except BaseException as exc:
+                done = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
+                note_kept(exc, f"{done} of {spec.samples} samples complete are kept in {out}; finish with "
+                               f"'bench-sim dataset {spec_path} --out {out} --resume'")
+                raise
             run.ran, run.failed = writer.ran, writer.failed
             run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
     df = write_manifest(out, spec, meta, plan.values)
@@ -332,7 +374,6 @@ def run_dataset(
             "command": "dataset", "version": meta["version"], "seed": spec.seed,
             "spec_sha256": meta["spec_sha256"], "samples": spec.samples,
         })
-    run.wall_s = time.perf_counter() - t_start
     return run
 
 
@@ -358,7 +399,10 @@ class _SampleWriter:
         # --only on a complete sample: not complete while it is rewritten
         self.journal.path(i).unlink(missing_ok=True)
         rec: dict[str, Any] = {
-            "sample": i, "seed": self.spec.seed, "values": self.values[i],
+            "sample": i, "seed": self.spec.seed,
+            "values": self.values[i],
+            "split": split_of(self.spec.seed, i, self.spec.splits),
+            "spec_sha256": self.spec.identity(),  # --resume takes only this spec's and seed's records
             "wall_s": round(float(outcome.wall_s), 4), "worker": str(outcome.worker),
         }
         if outcome.ok:
@@ -370,7 +414,7 @@ class _SampleWriter:
             rec.update(status="failed", error=outcome.error)
             self.failed[i] = str(outcome.error)
             self.bar.note(f"{len(self.failed)} failed")
-        self.journal.write(rec)  # after the arrays: a record says they are on disk
+        self.journal.write(strict_json(rec))  # after the arrays: a record says they are on disk
         self.ran.append(i)
         self.bar.advance()
         if time.monotonic() - self._last_manifest > MANIFEST_EVERY_S:

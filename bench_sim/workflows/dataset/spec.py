@@ -71,6 +71,9 @@ from bench_sim.errors import BenchSimError
 from bench_sim.io import sha256_file
 from bench_sim.pipeline import check_stages
 from bench_sim.runtime.execution import task_seed_sequence
+from bench_sim.workflows.dataset.splits import DEFAULT_SPLITS, check_splits
+from bench_sim.workflows.dataset.targets import check_camera
+from bench_sim.workflows.preflight import SeedField
 from bench_sim.workflows.simulate import check_inputs
 
 __all__ = [
@@ -100,6 +103,8 @@ SHAPE_KEYS = ("lines", "sensor.columns", "sensor.rows", "fusion.mu1", "fusion.mu
 _INTERIOR = 0.381966
 
 Scalar = bool | int | float | str
+#: Samples above which a spec is refused (the plan draws every sample's values up front)
+MAX_SAMPLES = 100_000
 
 
 class _Strict(BaseModel):
@@ -260,13 +265,15 @@ class _SpecFile(_Strict):
     name: str | None = None
     description: str = ""
     base: str | None = None
-    samples: Annotated[int, Field(ge=1, le=1_000_000_000)]
-    seed: Annotated[int, Field(ge=0)]
+    samples: Annotated[int, Field(ge=1, le=MAX_SAMPLES)]  # refused before anything is drawn
+    seed: SeedField
     stages: Any  # a list of stages or "all", checked by simulate.check_stages
     lines: Annotated[int, Field(ge=1)] | None = None
     columns: Annotated[int, Field(ge=1)] | None = None
     config: dict[str, Any] = {}
     randomize: dict[str, Any] = {}
+    splits: dict[str, Any] | None = None  # bench_sim.workflows.dataset.splits
+    camera: Literal["per_sample", "fixed"] = "per_sample"  # bench_sim.workflows.dataset.targets
 
 
 def nested(dotted: Mapping[str, Any]) -> dict[str, Any]:
@@ -335,6 +342,8 @@ class DatasetSpec:
     randomize: dict[str, Any]
     raw: dict[str, Any] = field(repr=False)
     images: dict[str, str] = field(default_factory=dict)
+    splits: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_SPLITS))
+    camera: str = "per_sample"
 
     @property
     def folder(self) -> Path:
@@ -464,8 +473,11 @@ def load_spec(path: str | Path) -> DatasetSpec:
     spec = DatasetSpec(
         path=path, name=top.name or path.stem, description=top.description, samples=top.samples,
         seed=top.seed, stages=stages, base=base, randomize=randomize, raw=raw, images=images,
+        splits=DEFAULT_SPLITS if top.splits is None else check_splits(top.splits, f"{path}: splits"),
+        camera=top.camera,
     )
     _check_keys_and_extremes(spec, _flatten(top.config))
+    check_camera(spec.camera, spec.randomize, str(path))
     return spec
 
 

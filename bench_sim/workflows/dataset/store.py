@@ -23,9 +23,9 @@ import numpy as np
 from bench_sim.config import config_sha256, config_to_toml_text
 from bench_sim.errors import BenchSimError
 from bench_sim.io import atomic_path, check_output_dir, umask, write_csv, write_json
-from bench_sim.pipeline import VARIABLES_BY_NAME, Variable
 from bench_sim.runtime.provenance import provenance
 from bench_sim.version import __version__
+from bench_sim.workflows.dataset.coordinates import constant_attrs, physical_coords, variable_attrs
 from bench_sim.workflows.dataset.reader import (
     COMPLETION_RECORD,
     DATA_STORE,
@@ -37,7 +37,10 @@ from bench_sim.workflows.dataset.reader import (
     RECORDS_DIR,
     STAGE_VARIABLES,
     read_records,
+    variable_meta,
 )
+from bench_sim.workflows.dataset.splits import split_indices, split_of
+from bench_sim.workflows.dataset.targets import strict_json
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -57,14 +60,9 @@ __all__ = [
 ]
 
 #: Format of the dataset folder (``dataset.json``'s ``format``), raised on incompatible changes
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 #: Bytes of a sample's record and manifest rows, and of the card, thumbnails and metadata
 RECORD_BYTES, FIXED_BYTES = 16 * 1024, 8 * 2**20
-
-
-def _pass_variable(name: str) -> Variable:
-    """The pass variable a dataset variable stores (:data:`bench_sim.pipeline.PASS_VARIABLES`)."""
-    return VARIABLES_BY_NAME[name]
 
 
 def bytes_per_sample(stages: int, lines: int, columns: int, fused: bool) -> int:
@@ -110,14 +108,14 @@ def _schema(spec: DatasetSpec) -> dict[str, Any]:
         variables[name] = {
             "dims": ["sample", "stage", "line", "column"], "dtype": dtype, "chunks": [1, 1, lines, cols],
             "shape": [spec.samples, n_st, lines, cols],
-            "units": _pass_variable(name).units, "long_name": _pass_variable(name).doc,
+            "units": variable_meta(name)[0], "long_name": variable_meta(name)[1],
         }
     if spec.fused:
         for name, dtype in FUSED_VARIABLES.items():
             variables[name] = {
                 "dims": ["sample", "line", "column"], "dtype": dtype, "chunks": [1, lines, cols],
                 "shape": [spec.samples, lines, cols],
-                "units": _pass_variable(name).units, "long_name": _pass_variable(name).doc,
+                "units": variable_meta(name)[0], "long_name": variable_meta(name)[1],
             }
     return {"variables": variables, "store": DATA_STORE, "zarr_format": 3}
 
@@ -146,6 +144,12 @@ def _info(spec: DatasetSpec) -> dict[str, Any]:
         "spec_sha256": spec.identity(),
         "randomize": {k: d.model_dump() for k, d in spec.randomize.items()},
         "images": spec.images,
+        "splits": spec.splits,
+        "split_rule": "sample i is in the split whose cumulative fraction interval (names in alphabetical "
+        "order) holds u = first 8 "
+        "bytes of SHA-256('seed:i') / 2**64 (bench_sim.workflows.dataset.splits)",
+        "split_samples": {k: len(v) for k, v in split_indices(spec.seed, spec.samples, spec.splits).items()},
+        "camera": spec.camera,
         "streams": (
             "sample i owns numpy.random.SeedSequence(seed, spawn_key=(i,)) = SeedSequence(seed).spawn(n)[i]; "
             "its child 0 draws the randomised values (keys in sorted order), its child 1 drives the "
@@ -174,8 +178,11 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
         for name, v in schema.items()
     }
     ds = xr.Dataset(data, coords=coords)
+    ped = float(spec.base.dtdi.pedestal_dn)
     for name, v in schema.items():
-        ds[name].attrs.update(units=v["units"], long_name=v["long_name"])
+        ds[name].attrs.update(variable_attrs(name, v["units"], v["long_name"], ped))
+    for cname, (dim, cvalues, cattrs) in physical_coords(spec.base).items():
+        ds.coords[cname] = (dim, cvalues, cattrs)
     ds["sample"].attrs.update(units="1", long_name="sample index (spawn key of its random stream)")
     ds["stage"].attrs.update(units="1", long_name="DTDI stage m (rows summed)")
     ds["line"].attrs.update(units="1", long_name="scene line (material at line * delta along the track)")
@@ -190,6 +197,9 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
         beta_bits=int(spec.base.dtdi.beta_bits),
         pedestal_dn=float(spec.base.dtdi.pedestal_dn),
         complete_samples="see samples/*.json records (status complete) or the manifest",
+        camera=spec.camera,
+        Conventions="CF-1.10",
+        **constant_attrs(spec.base),
     )
     if spec.fused:
         ds.attrs.update(mu1=int(spec.base.fusion.mu1), mu2=int(spec.base.fusion.mu2))
@@ -199,7 +209,7 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
         ds.to_zarr(folder / DATA_STORE, mode="w-", zarr_format=3, consolidated=True, compute=False,
                    encoding=encoding)
     (folder / RECORDS_DIR).mkdir()
-    write_json(folder / DATASET_JSON, info)
+    write_json(folder / DATASET_JSON, strict_json(info))
 
 
 def lay_out(spec: DatasetSpec, out: Path) -> None:
@@ -282,10 +292,11 @@ def manifest_frame(
         rec = records.get(i, {})
         drawn = rec.get("values") or values[i]
         metrics = rec.get("metrics") or {}
-        row: dict[str, Any] = {"sample": i, "seed": spec.seed}
+        row: dict[str, Any] = {"sample": i, "seed": spec.seed, "split": split_of(spec.seed, i, spec.splits)}
         row.update({k: drawn.get(k) for k in spec.randomize})
         row["config_sha256"] = rec.get("config_sha256", "")
-        row.update({k: float(metrics.get(k, np.nan)) for k in metric_names})
+        # a record's null (strict JSON for a NaN metric) is NaN again in the table
+        row.update({k: float(np.nan if metrics.get(k) is None else metrics[k]) for k in metric_names})
         row.update(
             status=rec.get("status", "pending"), error=rec.get("error") or "",
             wall_s=float(rec.get("wall_s", np.nan)), worker=rec.get("worker", ""),

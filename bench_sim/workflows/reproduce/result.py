@@ -22,6 +22,8 @@ __all__ = [
     "Table1Result",
     "SceneResult",
     "RunRecord",
+    "TruthResult",
+    "SeedsResult",
     "RunTimings",
     "ReproduceResult",
 ]
@@ -169,6 +171,24 @@ class RunTimings:
 
 
 @dataclass(frozen=True)
+class TruthResult:
+    """Gamma_HDR against its exact truth (:class:`bench_sim.measure.fusion_scores.FusionScores`'s
+    summary): the light ratio of the TDI window and, per rule (eq. 11, the clip-aware rule), the
+    relative errors per region and the pixels taken from a clipped stage."""
+
+    fusion_truth: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class SeedsResult:
+    """``reproduce --seeds N``: the seeds and, per headline number, its mean, sample standard
+    deviation and values over them (:mod:`bench_sim.workflows.reproduce.seeds`)."""
+
+    seeds: list[int]
+    spread: dict[str, Any]
+
+
+@dataclass(frozen=True)
 class ReproduceResult:
     """Everything ``reproduce`` measured; ``timings`` is ``None`` until the run is timed."""
 
@@ -178,10 +198,16 @@ class ReproduceResult:
     scene: SceneResult
     record: RunRecord
     timings: RunTimings | None = None
+    truth: TruthResult | None = None
+    seeds: SeedsResult | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """``metrics.json``'s dict: the sections' fields, flat, in order."""
         parts: list[Any] = [self.shape, self.dynamic_range, self.table1, self.scene, self.record]
+        if self.truth is not None:
+            parts.append(self.truth)
+        if self.seeds is not None:
+            parts.append(self.seeds)
         if self.timings is not None:
             parts.append(self.timings)
         out: dict[str, Any] = {}

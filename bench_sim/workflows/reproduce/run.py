@@ -8,7 +8,11 @@ Outputs (``results/paper`` by default): ``fig3_stages.png``, ``fig4_hdr.png``, `
 ``gamma2.tiff`` (16-bit), ``gamma_hdr.exr`` (channels ``Y`` = Gamma_HDR [DN, stage-mu2 units] and
 ``source`` = the stage each pixel came from), ``gamma_tra.png``, ``table1.csv``, ``metrics.json``,
 ``report.md``, ``snr_vs_signal.png`` (SNR of Gamma1, Gamma2, Gamma_HDR versus signal from the
-photon-transfer series through the chain). Every file carries the config, seed and version.
+photon-transfer series through the chain), ``gamma_hdr_error.png`` and ``tdi_light_ratio.png``
+(Gamma_HDR against its exact truth, :mod:`bench_sim.measure.fusion_scores`),
+``mtf50_vs_stage.png`` and ``.csv`` (MTF50 along and across the track per stage, from a
+companion pass with slanted edges:
+:mod:`bench_sim.workflows.reproduce.stage_mtf`). Every file carries the config, seed and version.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.fusion.tonemap import quantize_display, tone_map
 from bench_sim.io import output_set, write_exr, write_json, write_png, write_tiff16
 from bench_sim.measure.chain_dr import ChainDR, measure_chain_dynamic_range
+from bench_sim.measure.fusion_scores import fusion_scores
 from bench_sim.measure.pass_metrics import PassMetrics, pass_metrics, patch_slices
 from bench_sim.measure.uniform_field import measurement_pedestal_dn
 from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
@@ -63,8 +68,13 @@ from bench_sim.workflows.reproduce.result import (
     RunShape,
     RunTimings,
     SceneResult,
+    SeedsResult,
     Table1Result,
+    TruthResult,
 )
+from bench_sim.workflows.reproduce.seeds import headline_numbers, seed_spread
+from bench_sim.workflows.reproduce.stage_mtf import measure_stage_mtf, write_stage_mtf
+from bench_sim.workflows.reproduce.truth_figures import write_truth_figures
 
 __all__ = [
     "run_reproduce", "check_reproducible", "quick_config", "PAPER", "FIG3_STAGES", "QUICK_OVERRIDES"
@@ -183,7 +193,7 @@ def _pass_with_progress(cfg: BenchConfig, stages: list[int], rng: np.random.Gene
     pass), with a progress bar over the frames."""
     frames = cfg.lines + max(stages) - 1
     with progress_bar("render + sensor + DTDI", frames, "frames") as bar:
-        return run_pass(cfg, stages, rng, truth=False, on_frames=bar.advance)
+        return run_pass(cfg, stages, rng, truth=True, on_frames=bar.advance)
 
 
 def _fuse(cfg: BenchConfig, sim: PassResult) -> tuple[FusionResult, np.ndarray]:
@@ -233,10 +243,16 @@ def _result(
     )
 
 
-def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False) -> dict[str, Any]:
+def run_reproduce(
+    cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False, seeds: int = 1
+) -> dict[str, Any]:
     """Run the reproduction and write its outputs into ``out``. Returns ``metrics.json``'s dict
-    (:meth:`~bench_sim.workflows.reproduce.result.ReproduceResult.to_dict`)."""
+    (:meth:`~bench_sim.workflows.reproduce.result.ReproduceResult.to_dict`). ``seeds > 1``: the
+    headline numbers also over seeds ``seed .. seed + seeds - 1`` as mean +- sd (the files are
+    seed ``seed``'s)."""
     seed = check_seed(seed)
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise BenchSimError(f"--seeds = {seeds!r}: must be an integer >= 1")
     if quick:
         cfg = quick_config(cfg)
     stages, fig3 = _stages(cfg)
@@ -259,18 +275,27 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
     levels: dict[str, Any] = {"n_levels": QUICK_DR_LEVELS} if quick else {}
     chain = measure_chain_dynamic_range(cfg, rng, columns=min(CHAIN_DR_COLUMNS, cfg.sensor.columns), **levels)
     pm = pass_metrics(cfg, sim, fused)
+    scores = fusion_scores(cfg, sim, fused)  # Gamma_HDR against its exact truth, eq. 11 and clip-aware
     timer.add("metrics", time.perf_counter() - t0)
+    # 4b. sharpness per stage: a companion pass with slanted edges (the paper target has none)
+    t0 = time.perf_counter()
+    stage_mtf = measure_stage_mtf(cfg, seed)
+    timer.add("sharpness", time.perf_counter() - t0)
     # 5. outputs
     t0 = time.perf_counter()
     setup = sim.setup
     meta = provenance(cfg, seed, quick=quick, render=render_provenance(setup.info),
                       backend=setup.backend.as_dict())
-    result = _result(cfg, stages, fig3, sim, chain, pm, meta)
+    result = replace(_result(cfg, stages, fig3, sim, chain, pm, meta), truth=TruthResult(scores.summary))
+    if seeds > 1:
+        result = replace(result, seeds=_over_seeds(cfg, stages, fig3, seed, seeds, quick, result))
     record = {"command": "reproduce", "quick": quick, "version": meta["version"], "seed": int(seed),
               "config_sha256": meta["config_sha256"]}
     with output_set(out, record) as tmp:  # the files as one set: all of them or none
         _write_outputs(tmp, cfg, result, meta, sim.stage_dn, fused, tra8, setup.grid.panel)
         _snr_figure(tmp / "snr_vs_signal.png", chain, meta)
+        write_stage_mtf(stage_mtf, cfg, tmp, meta)
+        write_truth_figures(scores, tmp, meta)
         timer.add("write", time.perf_counter() - t0)
         # like the timings, a fact of this process (fewer renders when it had the records cached)
         result = replace(result, timings=RunTimings(
@@ -282,6 +307,29 @@ def run_reproduce(cfg: BenchConfig, *, seed: int, out: Path, quick: bool = False
         write_report(tmp / "report.md", result, cfg, quick)
     _print_timings(result.timings, out)
     return metrics
+
+
+def _over_seeds(
+    cfg: BenchConfig, stages: list[int], fig3: tuple[int, ...], seed: int, n: int, quick: bool,
+    first: ReproduceResult,
+) -> SeedsResult:
+    """The headline numbers over seeds ``seed .. seed + n - 1`` (``first`` is seed ``seed``'s
+    run): each further seed runs the pass, the fusion, the chain DR and the metrics (no files)."""
+    runs = [headline_numbers(first.to_dict())]
+    levels: dict[str, Any] = {"n_levels": QUICK_DR_LEVELS} if quick else {}
+    for s in range(seed + 1, seed + n):
+        rng = np.random.default_rng(s)
+        sim = _pass_with_progress(cfg, stages, rng)
+        fused, _ = _fuse(cfg, sim)
+        columns = min(CHAIN_DR_COLUMNS, cfg.sensor.columns)
+        chain = measure_chain_dynamic_range(cfg, rng, columns=columns, **levels)
+        pm = pass_metrics(cfg, sim, fused)
+        meta = provenance(cfg, s, quick=quick, render=render_provenance(sim.setup.info),
+                          backend=sim.setup.backend.as_dict())
+        res = replace(_result(cfg, stages, fig3, sim, chain, pm, meta),
+                      truth=TruthResult(fusion_scores(cfg, sim, fused).summary))
+        runs.append(headline_numbers(res.to_dict()))
+    return SeedsResult(list(range(seed, seed + n)), seed_spread(runs))
 
 
 def _print_timings(timings: RunTimings | None, out: Path) -> None:

@@ -13,6 +13,7 @@ Both the run (:mod:`bench_sim.workflows.sweep.run`) and the outputs
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from bench_sim.io import OUTPUT_MARKER, check_output_dir, sha256_text
 from bench_sim.render.engines import check_fast_engine_valid
 from bench_sim.runtime.journal import Journal
 from bench_sim.workflows.simulate import check_inputs
+from bench_sim.workflows.sweep.point_images import IMAGES_DIR
 from bench_sim.workflows.sweep.spec import SweepSpec, load_spec
 
 __all__ = [
@@ -38,6 +40,7 @@ __all__ = [
     "banding_column",
     "column_docs",
     "journal",
+    "own_points",
     "plan_sweep",
     "read_points",
     "spec_sha256",
@@ -95,8 +98,37 @@ COLUMNS: dict[str, tuple[str, str, str]] = {
     "eq18_holds": ("1", SCENE, "eq. 18: omega(HDR) < min(omega1, omega2)"),
     "spot_fill_ratio": ("1", SCENE, "lights.strong / lights.weak irradiance (empty unless both emit)"),
     "no_patches": ("1", SCENE, "why the patch metrics are empty (no wedge in view)"),
+    "mtf50_along_gamma1": ("cycles/px", SCENE, "ISO 12233 e-SFR MTF50 along the track (lines) of Gamma1, "
+                           "mean over the slanted edges (empty: no slanted_edges target, or clipped)"),
+    "mtf50_along_gamma2": ("cycles/px", SCENE, "MTF50 along the track of Gamma2 (stage mu2)"),
+    "mtf50_along_gamma_hdr": ("cycles/px", SCENE, "MTF50 along the track of Gamma_HDR"),
+    "mtf50_across_gamma1": ("cycles/px", SCENE, "MTF50 across the track (columns) of Gamma1"),
+    "mtf50_across_gamma2": ("cycles/px", SCENE, "MTF50 across the track of Gamma2"),
+    "mtf50_across_gamma_hdr": ("cycles/px", SCENE, "MTF50 across the track of Gamma_HDR"),
     "mitsuba_renders": ("1", RUN, "Mitsuba renders this point's pass made"),
 }
+#: Gamma_HDR against its exact truth (:mod:`bench_sim.measure.fusion_scores`): per rule and region
+TRUTH_RULES = ("eq11", "clip")
+TRUTH_REGIONS = ("whole", "spot", "fill", "spot_edge")
+COLUMNS.update({
+    f"truth_{stat}_{rule}_{region}": (
+        "1", SCENE, f"{'mean' if stat == 'bias' else 'RMS'} relative error of Gamma_HDR by rule "
+        f"{rule!r} against its exact truth, region {region!r}",
+    )
+    for rule in TRUTH_RULES for region in TRUTH_REGIONS for stat in ("bias", "rms")
+})
+COLUMNS.update({
+    f"from_clipped_fraction_{rule}": (
+        "1", SCENE, f"pixels of Gamma_HDR by rule {rule!r} taken from a clipped stage"
+    )
+    for rule in TRUTH_RULES
+})
+COLUMNS["tdi_light_ratio_outside_fraction"] = (
+    "1", SCENE, "pixels whose TDI-window light ratio (per row over mu2 rows / over mu1 rows) leaves 1 +- 0.05"
+)
+COLUMNS["tdi_light_ratio_p99"] = ("1", SCENE, "99th percentile of the TDI-window light ratio")
+#: The column of a spec's ``ratio = [a, b]`` (:mod:`bench_sim.workflows.sweep.light_keys`)
+RATIO_DOC = ("1", SCENE, "irradiance of the spec's ratio lights, first / second (empty unless both emit)")
 #: Banding columns (one per flickering light and stage): ``banding_<light>_stage_<m>``.
 BANDING_DOC = ("1", SCENE, "flicker banding along the track: amplitude at the light's frequency "
                "relative to the mean, of the stage's illumination profile")
@@ -120,6 +152,9 @@ class PointTask:
     stages: tuple[int, ...]
     dr_levels: int
     flicker_lights: tuple[str, ...]
+    banding_stages: tuple[int, ...] = ()  # the spec's stages (points_images.csv)
+    ratio: tuple[str, str] | None = None  # the spec's light pair (light_ratio)
+    images_dir: str | None = None  # keep_images: DIR/images (bench_sim.workflows.sweep.point_images)
 
 
 @dataclass(frozen=True)
@@ -141,7 +176,7 @@ class SweepPlan:
 
 def column_docs(plan: SweepPlan) -> dict[str, tuple[str, str, str]]:
     """Every metric column of the plan -> (units, kind, meaning)."""
-    return {c: COLUMNS.get(c, BANDING_DOC) for c in plan.columns}
+    return {c: {**COLUMNS, "light_ratio": RATIO_DOC}.get(c, BANDING_DOC) for c in plan.columns}
 
 
 def spec_sha256(spec: SweepSpec) -> str:
@@ -183,20 +218,50 @@ def _check_points(spec: SweepSpec) -> None:
             raise BenchSimError(f"{where}: {str(exc).splitlines()[0]}") from None
 
 
-def _done_points(out: Path, sha: str, resume: bool) -> dict[int, dict[str, Any]]:
+def _sweep_meta(out: Path) -> dict[str, Any] | None:
+    """``sweep.json`` of a sweep folder; ``None`` (one warning) if it is empty or unreadable
+    (a crash while it was written): the records, which carry their spec's hash, decide then."""
+    try:
+        meta = json.loads((out / "sweep.json").read_text())
+        if isinstance(meta, dict):
+            return meta
+    except (OSError, ValueError):
+        pass
+    warnings.warn(f"bench_sim: {out / 'sweep.json'}: empty or unreadable: rewritten; the point records "
+                  "are checked one by one", RuntimeWarning, stacklevel=3)
+    return None
+
+
+def own_points(out: Path, sha: str, seed: int) -> dict[int, dict[str, Any]]:
+    """The finished (``ok``) point records of ``out`` that belong to this sweep: same spec hash
+    and seed in the record. Others (another spec's or seed's, a record without them) are
+    recomputed, with one warning line counting them."""
+    own, foreign = {}, 0
+    for i, rec in read_points(out).items():
+        if rec.get("spec_sha256") != sha or rec.get("seed") != seed:
+            foreign += 1
+        elif rec.get("status") == "ok":
+            own[i] = rec
+    if foreign:
+        warnings.warn(f"bench_sim: {out / JOURNAL}: {foreign} point records of another spec or seed: "
+                      "recomputed", RuntimeWarning, stacklevel=3)
+    return own
+
+
+def _done_points(out: Path, sha: str, seed: int, resume: bool) -> dict[int, dict[str, Any]]:
     """The points already finished in ``out`` (``--resume``), after checking the folder."""
     if resume and out.is_dir() and any(out.iterdir()):
         meta_path = out / "sweep.json"
-        if not meta_path.is_file():
+        if not meta_path.is_file() and not (out / JOURNAL).is_dir():
             raise BenchSimError(f"--out = {str(out)!r}: --resume needs a sweep folder (no sweep.json there)")
-        old = json.loads(meta_path.read_text())
-        if old.get("spec_sha256") != sha:
+        old = _sweep_meta(out) if meta_path.is_file() else None
+        if old is not None and old.get("spec_sha256") != sha:
             raise BenchSimError(
                 f"--out = {str(out)!r}: holds a sweep of another spec or base config "
                 f"(spec_sha256 {str(old.get('spec_sha256'))[:12]} != {sha[:12]}): --resume needs the "
                 "same spec"
             )
-        return {i: r for i, r in read_points(out).items() if r.get("status") == "ok"}
+        return own_points(out, sha, seed)
     if _unfinished_sweep(out):
         raise BenchSimError(
             f"--out = {str(out)!r}: holds an unfinished sweep: add --resume to finish it, or choose "
@@ -213,7 +278,7 @@ def plan_sweep(spec_path: str | Path, out: str | Path, *, resume: bool = False) 
     _check_points(spec)
     out = Path(out).expanduser().resolve()
     sha = spec_sha256(spec)
-    done = _done_points(out, sha, resume)
+    done = _done_points(out, sha, spec.seed, resume)
     flicker = tuple(sorted({n for p in spec.points for n, light in p.cfg.lights.items() if light.flickers}))
     quick_levels = 24 if spec.quick else 40
     tasks = tuple(
@@ -222,12 +287,16 @@ def plan_sweep(spec_path: str | Path, out: str | Path, *, resume: bool = False) 
             cfg=p.cfg,
             root_seed=spec.seed,
             stream=0 if spec.noise == "common" else p.index,
-            stages=_point_stages(p.cfg, bool(flicker)),
+            stages=tuple(sorted({*_point_stages(p.cfg, bool(flicker)), *spec.stages})),
             dr_levels=quick_levels,
             flicker_lights=flicker,
+            banding_stages=spec.stages,
+            ratio=spec.ratio,
+            images_dir=str(out / IMAGES_DIR) if spec.keep_images else None,
         )
         for p in spec.points
     )
     stages = sorted({m for t in tasks for m in t.stages})
-    columns = (*COLUMNS, *(banding_column(n, m) for n in flicker for m in stages))
+    columns = (*COLUMNS, *(["light_ratio"] if spec.ratio else []),
+               *(banding_column(n, m) for n in flicker for m in stages))
     return SweepPlan(spec, out, tasks, done, resume, sha, columns)

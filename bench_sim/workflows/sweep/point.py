@@ -14,6 +14,7 @@ camera reports the same numbers, whichever worker ran it.
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import numpy as np
@@ -21,12 +22,17 @@ import numpy as np
 from bench_sim.config import BenchConfig
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.measure.chain_dr import measure_chain_dynamic_range
+from bench_sim.measure.fusion_scores import fusion_scores
 from bench_sim.measure.pass_metrics import pass_metrics
+from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges
 from bench_sim.metrics.banding import banding_amplitude, folded_cycles_per_line, illumination_profile
 from bench_sim.pipeline import run_pass
 from bench_sim.runtime.execution import task_seed_sequence, worker_cache
 from bench_sim.sensor.model import stage_offset_dn
-from bench_sim.workflows.sweep.plan import IMAGES, PointTask, banding_column
+from bench_sim.workflows.sweep.bands import banding_rows
+from bench_sim.workflows.sweep.light_keys import light_ratio
+from bench_sim.workflows.sweep.plan import IMAGES, TRUTH_REGIONS, TRUTH_RULES, PointTask, banding_column
+from bench_sim.workflows.sweep.point_images import write_point_images
 
 __all__ = ["measure_point"]
 
@@ -93,6 +99,21 @@ def _scene_columns(pm: Any) -> dict[str, Any]:
     return rec
 
 
+def _truth_columns(summary: dict[str, Any]) -> dict[str, Any]:
+    """Gamma_HDR against its exact truth (:func:`bench_sim.measure.fusion_scores.fusion_scores`)."""
+    rec: dict[str, Any] = {}
+    for rule in TRUTH_RULES:
+        scores = summary["rules"][rule]
+        for region in TRUTH_REGIONS:
+            for stat in ("bias", "rms"):
+                rec[f"truth_{stat}_{rule}_{region}"] = scores["error"][region][stat]
+        rec[f"from_clipped_fraction_{rule}"] = scores["from_clipped_fraction"]
+    rec["tdi_light_ratio_outside_fraction"] = summary["light_ratio"]["outside_fraction"]
+    p99 = summary["light_ratio"]["p99"]
+    rec["tdi_light_ratio_p99"] = None if math.isnan(p99) else p99
+    return rec
+
+
 def _banding_columns(task: PointTask, ds: Any) -> dict[str, float]:
     """Flicker banding of each flickering light at each stage of the pass (NaN where it does
     not flicker or emit at this point)."""
@@ -110,6 +131,23 @@ def _banding_columns(task: PointTask, ds: Any) -> dict[str, float]:
                 amp = banding_amplitude(profile, nu)
             rec[banding_column(name, m)] = amp
     return rec
+
+
+def _sharpness_columns(cfg: BenchConfig, ds: Any) -> dict[str, float | None]:
+    """MTF50 along and across the track of Gamma1, Gamma2 and Gamma_HDR from the target's
+    slanted edges (:mod:`bench_sim.measure.sharpness`); empty (``None``) without them."""
+    rec: dict[str, float | None] = {f"mtf50_{d}_{n}": None for d in ("along", "across") for n in IMAGES}
+    if not has_slanted_edges(cfg):
+        return rec
+    sharp = add_sharpness(ds, cfg)
+    for d in ("along", "across"):
+        if f"mtf50_{d}" not in sharp:  # no whole square in view
+            continue
+        for name, m in (("gamma1", cfg.fusion.mu1), ("gamma2", cfg.fusion.mu2)):
+            rec[f"mtf50_{d}_{name}"] = float(sharp[f"mtf50_{d}"].sel(stage=m))
+        if f"gamma_hdr_mtf50_{d}" in sharp:
+            rec[f"mtf50_{d}_gamma_hdr"] = float(sharp[f"gamma_hdr_mtf50_{d}"])
+    return {k: (None if v is not None and math.isnan(v) else v) for k, v in rec.items()}
 
 
 def measure_point(task: PointTask) -> dict[str, Any]:
@@ -134,5 +172,14 @@ def measure_point(task: PointTask) -> dict[str, Any]:
     lights = cfg.lights
     if lights.strong.emits and lights.weak.emits:
         rec["spot_fill_ratio"] = lights.strong.irradiance_w_m2 / lights.weak.irradiance_w_m2
+    rec.update(_truth_columns(fusion_scores(cfg, sim, fused).summary))
     rec.update(_banding_columns(task, sim.dataset))
+    rec.update(_sharpness_columns(cfg, sim.dataset))
+    if task.ratio is not None:
+        rec["light_ratio"] = light_ratio(cfg, task.ratio)
+    # the long table points_images.csv: every listed stage and gamma_hdr, with the closed form
+    stages = tuple(sorted({*task.banding_stages, mu1, mu2}))
+    rec["banding_images"] = banding_rows(task.index, cfg, stages, sim.dataset, fused)
+    if task.images_dir is not None:
+        write_point_images(task.images_dir, task.index, sim.dataset)
     return rec

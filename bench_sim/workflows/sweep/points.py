@@ -5,8 +5,9 @@
     mode), ``seed`` and ``stream`` (the point's ``SeedSequence(seed).spawn(..)[stream]``),
     ``config_sha256``, ``status`` (``ok`` | ``failed``), ``error`` (one line), the metrics
     (:data:`bench_sim.workflows.sweep.plan.COLUMNS`, then one banding column per flickering light
-    and stage), ``wall_s`` and ``worker``. ``#`` lines on top carry the provenance and the units
-    of every column (``pandas.read_csv(path, comment="#")``).
+    and stage), ``wall_s`` and ``worker``. The provenance and the units
+    of every column are in the sidecar ``points.csv.json`` (and ``sweep.nc``'s attributes):
+    ``pandas.read_csv(path)`` reads it as is.
 ``sweep.nc``
     The same as an :class:`xarray.Dataset` (``xarray.open_dataset``): in product mode one
     dimension per swept key, its values as the coordinate; in sequential and custom mode one
@@ -27,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import config_to_toml_text
-from bench_sim.io import write_csv
+from bench_sim.io import write_csv, write_json
+from bench_sim.io.strict_json import strict_json
 from bench_sim.runtime.provenance import provenance
 from bench_sim.version import __version__
 from bench_sim.workflows.sweep.plan import SweepPlan, column_docs
@@ -87,10 +89,16 @@ def csv_meta(plan: SweepPlan) -> dict[str, Any]:
                       swept_keys=list(plan.spec.keys), units=units)
 
 
+#: the sidecar of ``points.csv``: its provenance and the units of every column
+POINTS_META = "points.csv.json"
+
+
 def write_points_csv(out: Path, plan: SweepPlan, records: Mapping[int, Mapping[str, Any]]) -> Path:
-    """(Re)write ``points.csv`` with every finished point."""
+    """(Re)write ``points.csv`` (plain CSV: one header line, one row per finished point) and its
+    sidecar :data:`POINTS_META`."""
     header, rows = points_table(plan, records)
-    return write_csv(out / "points.csv", header, rows, csv_meta(plan))
+    write_json(out / POINTS_META, strict_json(csv_meta(plan)))
+    return write_csv(out / "points.csv", header, rows)
 
 
 # --- values -------------------------------------------------------------------------------------

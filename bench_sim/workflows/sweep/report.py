@@ -23,6 +23,7 @@ import numpy as np
 from bench_sim.config import config_sha256
 from bench_sim.io import atomic_path, markdown_table, write_text
 from bench_sim.version import __version__
+from bench_sim.workflows.sweep.bands import write_points_images
 from bench_sim.workflows.sweep.plan import IMAGES, SweepPlan, column_docs
 from bench_sim.workflows.sweep.plots import PLOT_GROUPS, plot_heatmaps, plot_key
 from bench_sim.workflows.sweep.points import (
@@ -198,7 +199,7 @@ def _report(plan: SweepPlan, records: Mapping[int, Mapping[str, Any]], sessions:
                   f"`{r['error']}`" for i, r in sorted(failed.items())]
     lines += ["", "## Files", ""]
     lines += [f"- `{f}`" for f in files]
-    lines += ["", f"Column units and meanings: `sweep.json` (`columns`) and the `#` lines of `points.csv`. "
+    lines += ["", f"Column units and meanings: `sweep.json` (`columns`) and `points.csv.json`. "
               f"Regenerate with `bench-sim sweep {spec.path.name} --out DIR`.", ""]
     return "\n".join(lines)
 
@@ -253,8 +254,12 @@ def write_outputs(out: Path, plan: SweepPlan, records: Mapping[int, Mapping[str,
                   sessions: Sequence[Any] = (), plots: bool = True) -> list[str]:
     """Write ``points.csv``, ``sweep.nc``, ``plots/`` (unless ``plots`` is false) and
     ``report.md``; returns their names."""
-    files = ["points.csv", "sweep.nc", "sweep.json"]
+    files = ["points.csv", "points.csv.json", "sweep.nc", "sweep.json"]
     write_points_csv(out, plan, records)
+    if any((r.get("metrics") or {}).get("banding_images") for r in records.values()):
+        files.append(str(write_points_images(out, records).relative_to(out)))  # banding per image
+    if plan.spec.keep_images:
+        files.append("images/ (one point_NNNNNN.zarr per point: its stage images, truth and Gamma_HDR)")
     ds = to_dataset(plan, records, sessions)
     with atomic_path(out / "sweep.nc") as tmp:
         ds.to_netcdf(tmp)

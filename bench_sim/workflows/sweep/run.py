@@ -43,8 +43,9 @@ from pathlib import Path
 from typing import Any
 
 from bench_sim.config import BenchConfig, config_sha256
-from bench_sim.errors import BenchSimError
+from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import OUTPUT_MARKER, write_json
+from bench_sim.io.folder_lock import folder_lock
 from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.runtime.provenance import provenance
@@ -111,6 +112,7 @@ def _record(plan: SweepPlan, task: PointTask, outcome: TaskOutcome) -> dict[str,
         "values": {k: _value_of(point.cfg, k) for k in plan.spec.keys},
         "varied": point.varied,
         "config_sha256": config_sha256(point.cfg),
+        "spec_sha256": plan.sha256,  # --resume takes only the records of this spec and seed
         "seed": plan.spec.seed,
         "stream": task.stream,
         "status": "ok" if outcome.ok else "failed",
@@ -171,7 +173,8 @@ def _open_folder(
     out = plan.out
     old_sessions: list[dict[str, Any]] = []
     if plan.resume and (out / "sweep.json").is_file():
-        old_sessions = json.loads((out / "sweep.json").read_text()).get("sessions", [])
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # unreadable: checked by the plan
+            old_sessions = list(json.loads((out / "sweep.json").read_text()).get("sessions", []))
     elif out.exists() and any(out.iterdir()):
         shutil.rmtree(out)  # a finished bench_sim output set (checked): replaced by this run
     out.mkdir(parents=True, exist_ok=True)
@@ -180,9 +183,8 @@ def _open_folder(
                "workers": workers if scheduler is None else None, "scheduler": scheduler is not None}
     sessions = [*old_sessions, session]
     write_json(out / "sweep.json", _meta(plan, "running", sessions, {}))
-    records = read_points(out) if plan.resume else {}
-    records.update(plan.done)
-    return sessions, records
+    # only this sweep's finished points (plan.done): a failed or foreign record is recomputed
+    return sessions, dict(plan.done)
 
 
 def _run_points(
@@ -221,6 +223,34 @@ def _totals(plan: SweepPlan, records: dict[int, dict[str, Any]]) -> dict[str, An
     }
 
 
+def _run_and_write(
+    plan: SweepPlan, workers: int | None, scheduler: str | None, progress: bool, plots: bool,
+    on_point: Callable[[dict[str, Any]], None] | None, spec_path: str | Path,
+) -> dict[int, dict[str, Any]]:
+    """Run the points still to do and write the outputs; an interruption (Ctrl-C, SIGTERM, a
+    lost cluster) says what is kept and how to resume."""
+    todo = plan.todo
+    records: dict[int, dict[str, Any]] = {}
+    # the cluster is reached (or started) before anything is written: an unreachable scheduler
+    # leaves no output behind
+    with open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext() as client:
+        sessions, records = _open_folder(plan, workers, scheduler)
+        try:
+            if todo:
+                _run_points(plan, client, records, progress, on_point)
+        except BaseException as exc:
+            ok = sum(1 for r in records.values() if r["status"] == "ok")
+            note_kept(exc, f"{ok} of {len(plan.tasks)} points finished are kept in {plan.out}; finish with "
+                           f"'bench-sim sweep {spec_path} --out {plan.out} --resume'")
+            raise
+    totals = _totals(plan, records)
+    write_outputs(plan.out, plan, records, sessions, plots=plots)
+    write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
+                                              "complete_with_failures", sessions, totals))
+    write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals})
+    return records
+
+
 def run_sweep(
     spec_path: str | Path,
     out: str | Path,
@@ -253,22 +283,14 @@ def run_sweep(
         Called in this process with each point's record as it is written.
     """
     _check_workers(workers, scheduler)
-    plan = plan_sweep(spec_path, out, resume=resume)
-    _preflight(plan, workers, scheduler, plots)
-    t0 = time.perf_counter()
-    todo = plan.todo
-    # the cluster is reached (or started) before anything is written: an unreachable scheduler
-    # leaves no output behind
-    with open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext() as client:
-        sessions, records = _open_folder(plan, workers, scheduler)
-        if todo:
-            _run_points(plan, client, records, progress, on_point)
+    # one writer per folder: held from before the folder is read until its last file is written
+    with folder_lock(Path(out).expanduser().resolve(), "sweep"):
+        plan = plan_sweep(spec_path, out, resume=resume)
+        _preflight(plan, workers, scheduler, plots)
+        t0 = time.perf_counter()
+        records = _run_and_write(plan, workers, scheduler, progress, plots, on_point, spec_path)
     totals = _totals(plan, records)
-    ok, failed, renders = totals["ok"], totals["failed"], totals["mitsuba_renders"]
-    write_outputs(plan.out, plan, records, sessions, plots=plots)
-    write_json(plan.out / "sweep.json", _meta(plan, "complete" if failed == 0 else "complete_with_failures",
-                                              sessions, totals))
-    write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals})
+    ok, failed, renders, todo = totals["ok"], totals["failed"], totals["mitsuba_renders"], plan.todo
     summary = SweepSummary(plan.out, len(plan.tasks), [t.index for t in todo], len(plan.done), ok, failed,
                            renders, time.perf_counter() - t0, records)
     if progress:

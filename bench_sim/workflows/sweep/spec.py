@@ -74,6 +74,8 @@ from bench_sim.config import (
     with_overrides,
 )
 from bench_sim.errors import BenchSimError
+from bench_sim.workflows.preflight import SEED_RULE, is_seed
+from bench_sim.workflows.sweep.light_keys import LIGHTING_KEYS, adds_light, check_banding_stages, check_ratio
 
 __all__ = [
     "MODES",
@@ -96,12 +98,13 @@ SPEC_KEYS: dict[str, str] = {
     "description": "free text, copied into sweep.json and report.md",
     "base": "bench config file, relative to the spec (default: the paper rig)",
     "quick": "true: apply reproduce's --quick preset to the base",
-    "seed": "root seed (integer >= 0)",
+    "seed": f"root seed ({SEED_RULE})",
     "mode": "product | sequential | custom",
     "noise": "independent | common",
     "overrides": "table of config keys set on the base for every point",
     "parameters": "[[parameters]] tables: key and one of values, range, linspace, logspace",
     "points": "custom mode: CSV file of points, relative to the spec",
+    **LIGHTING_KEYS,
 }
 #: Points above which a spec is refused (a typo in a range, not a study).
 MAX_POINTS = 100_000
@@ -141,7 +144,7 @@ class _SpecFile(BaseModel):
     description: Annotated[str, _check(lambda v: isinstance(v, str), "needs a string")] = ""
     base: Annotated[str | None, _check(lambda v: isinstance(v, str), "needs a config file name")] = None
     quick: Annotated[bool, _check(lambda v: isinstance(v, bool), "needs true or false")] = False
-    seed: Annotated[int, _check(lambda v: _is_int(v) and v >= 0, "needs an integer >= 0")] = 0
+    seed: Annotated[int, _check(is_seed, f"needs {SEED_RULE}")] = 0
     mode: Annotated[str, _check(lambda v: v in MODES, f"allowed {', '.join(MODES)}")] = "product"
     noise: Annotated[str, _check(lambda v: v in NOISE, f"allowed {', '.join(NOISE)}")] = "independent"
     overrides: Annotated[
@@ -150,6 +153,9 @@ class _SpecFile(BaseModel):
     parameters: Annotated[
         list[dict[str, Any]] | None, _check(_is_tables, "needs [[parameters]] tables (key and values)")
     ] = None
+    stages: Any = None  # bench_sim.workflows.sweep.light_keys
+    ratio: Any = None
+    keep_images: Annotated[bool, _check(lambda v: isinstance(v, bool), "needs true or false")] = False
     points: Annotated[
         str | None,
         _check(lambda v: isinstance(v, str), _NEED_POINTS),
@@ -195,6 +201,9 @@ class SweepSpec:
     values: dict[str, list[Any]]
     points: tuple[SweepPoint, ...]
     raw: dict[str, Any] = field(repr=False)
+    stages: tuple[int, ...] = ()  # banding stages (bench_sim.workflows.sweep.light_keys)
+    ratio: tuple[str, str] | None = None
+    keep_images: bool = False  # bench_sim.workflows.sweep.point_images
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -254,8 +263,9 @@ def _number(spec: Path, key: str, form: str, table: dict[str, Any], name: str) -
     return v
 
 
-def parameter_values(spec: Path, key: str, table: dict[str, Any]) -> list[Any]:
-    """The values of one ``[[parameters]]`` table (see the module docstring)."""
+def _axis_size(spec: Path, key: str, table: dict[str, Any]) -> int:
+    """How many values one ``[[parameters]]`` table gives, from its numbers alone (no list is
+    built: a ``num`` of 10**9 costs nothing); the table's form and numbers are checked."""
     forms = [f for f in VALUE_FORMS if f in table]
     if len(forms) != 1:
         raise _err(
@@ -266,7 +276,7 @@ def parameter_values(spec: Path, key: str, table: dict[str, Any]) -> list[Any]:
     if form == "values":
         if not isinstance(spec_v, list) or not spec_v:
             raise _err(spec, f"parameter {key}: values = {spec_v!r}: needs a non-empty list")
-        return list(spec_v)
+        return len(spec_v)
     if not isinstance(spec_v, dict):
         raise _err(
             spec, f"parameter {key}: {form} = {spec_v!r}: needs a table like {{ start = .., stop = .. }}"
@@ -280,19 +290,37 @@ def parameter_values(spec: Path, key: str, table: dict[str, Any]) -> list[Any]:
         step = _number(spec, key, form, spec_v, "step")
         if step == 0 or (stop - start) / step < 0:
             raise _err(spec, f"parameter {key}: range step = {step!r} never goes from {start!r} to {stop!r}")
-        n = int(math.floor((stop - start) / step + 1e-9)) + 1
+        steps = math.floor((stop - start) / step + 1e-9)
+        return int(steps) + 1 if math.isfinite(steps) else MAX_POINTS + 1
+    num = spec_v.get("num")
+    if isinstance(num, bool) or not isinstance(num, int) or num < 1:
+        raise _err(spec, f"parameter {key}: {form}.num = {num!r}: needs an integer >= 1")
+    return num
+
+
+def parameter_values(spec: Path, key: str, table: dict[str, Any], limit: int = MAX_POINTS) -> list[Any]:
+    """The values of one ``[[parameters]]`` table (see the module docstring); more than
+    ``limit`` of them are refused before any is made."""
+    n = _axis_size(spec, key, table)  # checks the form and its numbers
+    form = next(f for f in VALUE_FORMS if f in table)
+    spec_v = table[form]
+    if n > limit:
+        raise _err(spec, f"parameter {key}: {form} gives {n} values: more than {MAX_POINTS} points; "
+                   "split the sweep")
+    if form == "values":
+        return list(spec_v)
+    start, stop = spec_v["start"], spec_v["stop"]
+    if form == "range":
+        step = spec_v["step"]
         vals = [start + i * step for i in range(n)]
         if all(isinstance(x, int) for x in (start, stop, step)):
             return [int(v) for v in vals]
         return [float(v) for v in vals]
-    num = spec_v.get("num")
-    if isinstance(num, bool) or not isinstance(num, int) or num < 1:
-        raise _err(spec, f"parameter {key}: {form}.num = {num!r}: needs an integer >= 1")
     if form == "linspace":
-        return [float(v) for v in np.linspace(start, stop, num)]
+        return [float(v) for v in np.linspace(start, stop, n)]
     if start <= 0 or stop <= 0:
         raise _err(spec, f"parameter {key}: logspace from {start!r} to {stop!r}: both must be > 0")
-    return [float(v) for v in np.geomspace(start, stop, num)]
+    return [float(v) for v in np.geomspace(start, stop, n)]
 
 
 def _cell(text: str) -> Any:
@@ -308,8 +336,17 @@ def _custom_points(spec: Path, table: str) -> tuple[tuple[str, ...], list[dict[s
     path = (spec.parent / table).resolve()
     if not path.is_file():
         raise _err(spec, f"points = {table!r}: no such file {path}")
-    with path.open(newline="") as fh:
-        rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:  # counted before the rows are kept
+            count = sum(1 for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")) - 1
+        if count > MAX_POINTS:
+            raise _err(spec, f"points = {table!r}: {count} points: more than {MAX_POINTS}; split the sweep")
+        with path.open(newline="", encoding="utf-8") as fh:
+            rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+    except UnicodeDecodeError as exc:
+        raise _err(spec, f"points = {table!r}: not UTF-8 text (offset {exc.start})") from None
+    except (OSError, csv.Error) as exc:
+        raise _err(spec, f"points = {table!r}: cannot read it ({exc})") from None
     if len(rows) < 2:
         raise _err(spec, f"points = {table!r}: needs a header of dotted keys and at least one row")
     keys = tuple(h.strip() for h in rows[0])
@@ -340,9 +377,11 @@ def _base_config(spec: Path, top: _SpecFile) -> BenchConfig:
     return base_cfg
 
 
-def _parameters(spec: Path, tables: list[dict[str, Any]]) -> dict[str, list[Any]]:
-    """Key -> values of the ``[[parameters]]`` tables, in their order."""
-    values: dict[str, list[Any]] = {}
+def _parameters(spec: Path, tables: list[dict[str, Any]], mode: str) -> dict[str, list[Any]]:
+    """Key -> values of the ``[[parameters]]`` tables, in their order. The point count of the
+    mode is computed from the axis sizes first (O(axes)) and refused above :data:`MAX_POINTS`
+    before any list is made."""
+    sizes: dict[str, int] = {}
     for p in tables:
         key = p.get("key")
         if not isinstance(key, str) or not key:
@@ -351,10 +390,14 @@ def _parameters(spec: Path, tables: list[dict[str, Any]]) -> dict[str, list[Any]
         if extra:
             allowed = ", ".join(("key", *VALUE_FORMS))
             raise _err(spec, f"parameter {key}: unknown '{extra[0]}' (allowed: {allowed})")
-        if key in values:
+        if key in sizes:
             raise _err(spec, f"parameter {key}: given twice")
-        values[key] = parameter_values(spec, key, p)
-    return values
+        sizes[key] = _axis_size(spec, key, p)
+    count = math.prod(sizes.values()) if mode == "product" else sum(sizes.values())
+    if count > MAX_POINTS:
+        shape = (" x " if mode == "product" else " + ").join(str(n) for n in sizes.values())
+        raise _err(spec, f"{count} points ({mode}: {shape}): more than {MAX_POINTS}; split the sweep")
+    return {str(p["key"]): parameter_values(spec, str(p["key"]), p) for p in tables}
 
 
 Combos = list[tuple[dict[str, Any], str | None]]
@@ -367,7 +410,7 @@ def _combinations(spec: Path, top: _SpecFile) -> tuple[tuple[str, ...], dict[str
         keys, rows = _custom_points(spec, top.points)
         return keys, {k: [row[k] for row in rows] for k in keys}, [(row, None) for row in rows]
     assert top.parameters is not None  # checked by _SpecFile
-    values = _parameters(spec, top.parameters)
+    values = _parameters(spec, top.parameters, top.mode)
     keys = tuple(values)
     if top.mode == "product":
         grid = itertools.product(*values.values())
@@ -390,12 +433,10 @@ def load_spec(path: str | Path) -> SweepSpec:
     base_cfg = _base_config(spec, top)
     keys, values, combos = _combinations(spec, top)
     for k in keys:
-        if not key_exists(base_cfg, k):
+        if not key_exists(base_cfg, k) and not adds_light(base_cfg, k):
             raise _err(spec, f"key {k!r}: not a setting of the bench config (check the section and name)")
     if not combos:
         raise _err(spec, "no points")
-    if len(combos) > MAX_POINTS:
-        raise _err(spec, f"{len(combos)} points: more than {MAX_POINTS}; split the sweep")
     base = config_to_toml_dict(base_cfg)
     points = tuple(
         SweepPoint(i, vals, _validated(spec, base, vals, i), varied)
@@ -403,5 +444,6 @@ def load_spec(path: str | Path) -> SweepSpec:
     )
     return SweepSpec(
         spec, top.name or spec.stem, top.description, top.mode, top.noise, top.seed, top.quick, base_cfg,
-        keys, values, points, raw,
+        keys, values, points, raw, check_banding_stages(spec, top.stages, [p.cfg for p in points]),
+        check_ratio(spec, top.ratio, [p.cfg for p in points]), top.keep_images,
     )

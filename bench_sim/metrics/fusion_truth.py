@@ -1,0 +1,132 @@
+"""A fused HDR image judged against its exact truth, and where eq. 11's assumption breaks.
+
+Eq. 11 takes ``Gamma2`` where ``Gamma1`` predicts it inside the word and ``(mu2/mu1) Gamma1``
+elsewhere. Both branches aim at the same value: the stage-``mu2`` signal without any clip, which
+the pass's truth knows exactly (``linear_dn`` of stage ``mu2`` less its offset, in DN). Against
+it this module measures:
+
+- :func:`relative_error`: ``(Gamma_HDR - truth) / truth`` per pixel;
+- :func:`error_summary`: bias (mean) and RMS of that error over regions;
+- :func:`from_clipped_stage`: the pixels the fusion took from a stage that clipped there;
+- :func:`tdi_light_ratio`: ``r = (photons_mu2 / mu2) / (photons_mu1 / mu1)``, the mean light per
+  row over the ``mu2`` rows of the TDI window against that over its first ``mu1`` rows. Eq. 11
+  assumes ``Gamma2 = (mu2/mu1) Gamma1``, i.e. ``r = 1``; where the illumination changes along the
+  track inside the window (the edge of a spot) ``r != 1`` and the branch taken from ``Gamma1``
+  is off by the factor ``r`` (relative error ``1/r - 1``), while ``Gamma2`` may already clip
+  where ``Gamma1`` says it does not;
+- :func:`illumination_regions`: the pixels under the spot, under the fill and at the spot's edge,
+  from the truth's illumination (photons per unit reflectance) and the light ratio.
+
+All functions are pure (arrays in, arrays or numbers out).
+
+References
+----------
+An HDR Imaging Method With DTDI Technology for Push-Broom Cameras, eq. 9-11 (the fusion and its
+assumption ``Gamma_mu2 = (mu2/mu1) Gamma_mu1``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = [
+    "relative_error",
+    "error_summary",
+    "from_clipped_stage",
+    "tdi_light_ratio",
+    "illumination_regions",
+    "LIGHT_RATIO_TOLERANCE",
+]
+
+#: |r - 1| above which the TDI window's light counts as changing (the spot's edge)
+LIGHT_RATIO_TOLERANCE = 0.05
+
+
+def relative_error(hdr: ArrayLike, truth: ArrayLike, floor: float = 1.0) -> np.ndarray:
+    """``(hdr - truth) / truth`` [1]; ``nan`` where the truth is below ``floor`` [DN]."""
+    h = np.asarray(hdr, dtype=np.float64)
+    t = np.asarray(truth, dtype=np.float64)
+    out = np.full(np.broadcast(h, t).shape, np.nan)
+    ok = t >= floor
+    np.divide(h - t, t, out=out, where=ok)
+    return out
+
+
+def error_summary(err: ArrayLike, regions: dict[str, np.ndarray]) -> dict[str, dict[str, float | None]]:
+    """Per region: ``bias`` (mean relative error), ``rms`` (root mean square), ``pixels``.
+
+    ``None`` for a region without a finite pixel."""
+    e = np.asarray(err, dtype=np.float64)
+    out: dict[str, dict[str, float | None]] = {}
+    for name, mask in regions.items():
+        v = e[np.asarray(mask, dtype=bool) & np.isfinite(e)]
+        out[name] = {
+            "bias": float(v.mean()) if v.size else None,
+            "rms": float(np.sqrt(np.mean(v * v))) if v.size else None,
+            "pixels": int(v.size),
+        }
+    return out
+
+
+def from_clipped_stage(source: ArrayLike, clipped: Mapping[int, ArrayLike]) -> np.ndarray:
+    """Pixels whose fused value came from a stage that clipped there: ``clipped[source]``.
+
+    Parameters
+    ----------
+    source
+        The stage each fused pixel came from.
+    clipped
+        Stage -> boolean map of its clipped pixels (the truth's ``clipped``, or the word at its
+        top counted from the stage image).
+    """
+    src = np.asarray(source)
+    out = np.zeros(src.shape, dtype=bool)
+    for m, c in clipped.items():
+        out |= (src == m) & np.asarray(c, dtype=bool)
+    return out
+
+
+def tdi_light_ratio(photons_mu1: ArrayLike, photons_mu2: ArrayLike, mu1: int, mu2: int) -> np.ndarray:
+    """``r = (photons_mu2 / mu2) / (photons_mu1 / mu1)`` [1] per scene line and column.
+
+    ``photons_m`` is the truth's mean photons of the stage-``m`` pixel (the sum over its ``m``
+    rows), so ``r`` is the mean light per row over the ``mu2`` rows relative to the first ``mu1``
+    rows; ``nan`` where stage ``mu1`` saw no light.
+    """
+    p1 = np.asarray(photons_mu1, dtype=np.float64) / int(mu1)
+    p2 = np.asarray(photons_mu2, dtype=np.float64) / int(mu2)
+    out = np.full(p1.shape, np.nan)
+    np.divide(p2, p1, out=out, where=p1 > 0)
+    return out
+
+
+def illumination_regions(
+    photons: ArrayLike, reflectance: ArrayLike, ratio: ArrayLike, tolerance: float = LIGHT_RATIO_TOLERANCE,
+    min_reflectance: float = 0.02,
+) -> dict[str, np.ndarray]:
+    """Boolean maps ``whole``, ``spot``, ``fill`` and ``spot_edge`` of the image.
+
+    The illumination is ``E = photons / reflectance`` (photons per unit reflectance of the stage
+    pixel, where the reflectance exceeds ``min_reflectance``). ``spot`` is where ``E`` exceeds the
+    geometric mean of the fill (its 10th percentile) and the peak (its 99.5th percentile), ``fill``
+    the rest; ``spot_edge`` is where the TDI window's light ratio leaves ``1 +- tolerance``
+    (:func:`tdi_light_ratio`), whatever the level.
+    """
+    p = np.asarray(photons, dtype=np.float64)
+    rho = np.asarray(reflectance, dtype=np.float64)
+    r = np.asarray(ratio, dtype=np.float64)
+    lit = rho > min_reflectance
+    e = np.full(p.shape, np.nan)
+    np.divide(p, rho, out=e, where=lit)
+    whole = np.ones(p.shape, dtype=bool)
+    if not lit.any():
+        empty = np.zeros(p.shape, dtype=bool)
+        return {"whole": whole, "spot": empty, "fill": empty.copy(), "spot_edge": empty.copy()}
+    fill_level, peak = np.percentile(e[lit], [10.0, 99.5])
+    split = np.sqrt(max(fill_level, 1e-300) * peak)
+    spot = lit & (e > split) if peak > 1.5 * fill_level else np.zeros(p.shape, dtype=bool)
+    edge = np.isfinite(r) & (np.abs(r - 1.0) > tolerance)
+    return {"whole": whole, "spot": spot, "fill": lit & ~spot, "spot_edge": edge}

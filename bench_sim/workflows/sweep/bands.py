@@ -1,0 +1,132 @@
+"""Flicker banding per image of a sweep point, with the closed form beside it: ``points_images.csv``.
+
+For every flickering, emitting light of a point and every image (each stage the spec lists in
+``stages``, the fused pair, and ``gamma_hdr``) one row of the long table ``points_images.csv``
+(point x image x light):
+
+=========================== =========================================================================
+``point``, ``image``, ``stage``  the point; ``stage_MMM`` or ``gamma_hdr`` (``stage``: ``m``, or ``mu2``)
+``light``, ``flicker_hz``   the light and its frequency [Hz]
+``cycles_per_line``         its frequency along the track, folded into ``0 .. 0.5``
+``amplitude``, ``phase_rad``  measured: :func:`bench_sim.metrics.flicker_theory.banding_phasor` of
+                            the image's illumination profile (stages: the truth ``photons /
+                            reflectance``, noise-free; ``gamma_hdr``: the fused image ``/ reflectance``)
+``predicted_amplitude``, ``predicted_phase_rad``  :func:`~bench_sim.metrics.flicker_theory.predicted_banding`
+                            (``gamma_hdr``: the stages' phasors weighted by the share of the profile
+                            each source stage makes, its ``mu1`` part scaled by ``mu2 / mu1``)
+``alone``                   the light is the only emitting light of the point; otherwise the
+                            measured amplitude is the prediction times the light's share of the
+                            illumination (the prediction is for the light alone)
+=========================== =========================================================================
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench_sim.config import BenchConfig
+from bench_sim.io import write_csv
+from bench_sim.metrics.flicker_theory import banding_phasor, predicted_banding
+from bench_sim.rig.geometry import rig_geometry
+from bench_sim.rig.lights import flicker_fundamental
+
+__all__ = ["IMAGES_CSV", "IMAGE_COLUMNS", "banding_rows", "write_points_images"]
+
+IMAGES_CSV = "points_images.csv"
+#: columns of ``points_images.csv`` -> units
+IMAGE_COLUMNS: dict[str, str] = {
+    "point": "1", "image": "1", "stage": "1", "light": "1", "flicker_hz": "Hz", "cycles_per_line": "1",
+    "amplitude": "1", "phase_rad": "rad", "predicted_amplitude": "1", "predicted_phase_rad": "rad",
+    "alone": "1",
+}
+#: waveform -> phase of its fundamental relative to ``flicker_phase_rad`` [rad]
+_FUNDAMENTAL_PHASE = {"sine": 0.0, "rectified_sine": -0.5 * math.pi}
+
+
+def _profile(values: np.ndarray, reflectance: np.ndarray) -> np.ndarray:
+    v = np.asarray(values, dtype=np.float64)
+    r = np.asarray(reflectance, dtype=np.float64)
+    ratio = np.divide(v, r, out=np.full(v.shape, np.nan), where=r > 0)
+    return np.nanmean(ratio, axis=1)
+
+
+def _prediction(cfg: BenchConfig, name: str, m: int) -> tuple[float, complex]:
+    """``(nu, A e^{i psi})`` of stage ``m`` for light ``name`` alone."""
+    light = cfg.lights.get(name)
+    geom = rig_geometry(cfg)
+    nu, amp, phase = predicted_banding(
+        flicker_fundamental(light.flicker_waveform, light.flicker_depth), light.flicker_hz,
+        light.flicker_phase_rad + _FUNDAMENTAL_PHASE[light.flicker_waveform], geom.line_period_s,
+        geom.t_int_s, m,
+    )
+    return nu, amp * cmath.exp(1j * phase)
+
+
+def _hdr_prediction(cfg: BenchConfig, name: str, ds: Any, fused: Any) -> complex:
+    """The fused image's phasor: ``sum_s q_s P_s`` over the source stages, ``q_s`` the share of
+    the profile's mean made by the pixels taken from stage ``s``."""
+    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
+    refl = np.asarray(ds["reflectance"].sel(stage=mu2).values, dtype=np.float64)
+    hdr = np.asarray(fused.hdr, dtype=np.float64)
+    part = np.divide(hdr, refl, out=np.zeros(hdr.shape), where=refl > 0)
+    total = float(part.sum())
+    if total <= 0:
+        return complex(float("nan"), 0.0)
+    q1 = float(part[np.asarray(fused.source) == mu1].sum()) / total
+    return q1 * _prediction(cfg, name, mu1)[1] + (1.0 - q1) * _prediction(cfg, name, mu2)[1]
+
+
+def banding_rows(
+    point: int, cfg: BenchConfig, stages: Sequence[int], ds: Any, fused: Any
+) -> list[dict[str, Any]]:
+    """The rows of ``points_images.csv`` of one point (module docstring). ``ds``: the pass's
+    dataset with its truth; ``fused``: its eq. 11 fusion
+    (:class:`~bench_sim.fusion.common.FusionResult`)."""
+    rows: list[dict[str, Any]] = []
+    emitting = [n for n, light in cfg.lights.items() if light.emits]
+    for name in emitting:
+        light = cfg.lights.get(name)
+        if not light.flickers:
+            continue
+        base = {"point": point, "light": name, "flicker_hz": float(light.flicker_hz),
+                "alone": len(emitting) == 1}
+        for m in stages:
+            nu, pred = _prediction(cfg, name, m)
+            amp, phase = banding_phasor(
+                _profile(ds["photons"].sel(stage=m).values, ds["reflectance"].sel(stage=m).values), nu
+            )
+            rows.append({**base, "image": f"stage_{m:03d}", "stage": m, "cycles_per_line": nu,
+                         "amplitude": amp, "phase_rad": phase, "predicted_amplitude": abs(pred),
+                         "predicted_phase_rad": cmath.phase(pred)})
+        mu2 = cfg.fusion.mu2
+        nu = _prediction(cfg, name, mu2)[0]
+        amp, phase = banding_phasor(_profile(fused.hdr, ds["reflectance"].sel(stage=mu2).values), nu)
+        pred = _hdr_prediction(cfg, name, ds, fused)
+        rows.append({**base, "image": "gamma_hdr", "stage": mu2, "cycles_per_line": nu, "amplitude": amp,
+                     "phase_rad": phase, "predicted_amplitude": abs(pred),
+                     "predicted_phase_rad": cmath.phase(pred)})
+    return rows
+
+
+def _cell(v: Any) -> Any:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return ""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return v
+
+
+def write_points_images(out: Path, records: Mapping[int, Mapping[str, Any]]) -> Path:
+    """(Re)write ``points_images.csv`` (plain CSV, one header line) from the point records."""
+    rows = [
+        [_cell(row.get(c)) for c in IMAGE_COLUMNS]
+        for i in sorted(records)
+        for row in (records[i].get("metrics") or {}).get("banding_images", [])
+    ]
+    return write_csv(out / IMAGES_CSV, list(IMAGE_COLUMNS), rows)

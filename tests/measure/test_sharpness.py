@@ -1,0 +1,185 @@
+"""e-SFR per DTDI stage on the simulator (bench_sim.measure.sharpness).
+
+A sync error ``e`` (the image moves ``1 + e`` pixels per line period) makes the ``m`` rows of
+stage ``m`` see a scene line ``e`` pixels apart: ``m`` copies, spaced ``e / (1 + e)`` lines in
+the output image, whose transfer is the Dirichlet kernel ``|sin(pi m d f) / (m sin(pi d f))|``,
+``d = e / (1 + e)`` -- the box of width ``m e`` pixels (``m d`` lines) sampled at its ``m``
+rows, with the same first zero ``f0 = 1 / (m d)`` cycles/line. Everything else (lens, pixel
+aperture, the integration smear) is common to every stage, so ``SFR_m / SFR_1`` is that kernel
+alone. Lit uniformly (the spot off), every noise source off: the numbers are the optics' and the
+motion's. The integration smear (an exposure of ``w`` line periods) is a box of ``w`` lines
+along the track alone.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bench_sim.measure.sharpness import SFR_FREQUENCY_CYC_PX, add_sharpness, has_slanted_edges
+from bench_sim.metrics.edge_rois import slanted_edge_rois
+from bench_sim.pipeline import run_pass
+from bench_sim.rig.target_sources import slanted_edges
+from tests.conftest import ALL_OFF, make_cfg
+
+pytestmark = pytest.mark.physics
+
+STAGES = (1, 2, 4, 8, 12, 16)
+
+
+def _bench(
+    sync_error: float, noise: bool = False, irradiance_w_m2: float = 40.0, t_int_s: float | None = None
+):
+    return make_cfg(
+        lines=160,
+        sensor={"rows": 16, "columns": 128, **({} if noise else ALL_OFF)},
+        target={"layout": "slanted_edges", "panel_lines": 256, "panel_columns": 128, "edge_cell_px": 128},
+        lights={"strong": {"enabled": False}, "weak": {"irradiance_w_m2": irradiance_w_m2}},
+        render={"spp": 4, "subpixels": 4},
+        fusion={"mu1": 2, "mu2": 16},
+        timing={"sync_error": sync_error, "integration_time_s": t_int_s},
+    )
+
+
+@pytest.fixture(scope="module")
+def passes():
+    out = {}
+    for eps in (0.0, 0.2):
+        cfg = _bench(eps)
+        out[eps] = add_sharpness(run_pass(cfg, STAGES, 1).dataset, cfg)
+    return out
+
+
+def _dirichlet(f: np.ndarray, m: int, d: float) -> np.ndarray:
+    x = np.pi * d * f
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.abs(np.sin(m * x) / (m * np.sin(x)))
+    return np.where(f == 0, 1.0, out)
+
+
+def test_sync_error_is_a_box_of_m_eps_per_stage(passes) -> None:
+    eps = 0.2
+    ds = passes[eps]
+    d = eps / (1 + eps)
+    f = SFR_FREQUENCY_CYC_PX
+    sfr = ds["sfr_along"].values
+    assert np.isfinite(sfr).all()
+    for i, m in enumerate(STAGES):
+        ratio = sfr[i] / sfr[0]
+        band = f <= 0.5
+        np.testing.assert_allclose(ratio[band], _dirichlet(f, m, d)[band], atol=0.035, err_msg=f"stage {m}")
+    for m, tol in ((12, 0.03), (16, 0.03)):
+        f0 = 1.0 / (m * d)  # the first zero: (1 + e) / (m e) cycles/line
+        s = sfr[STAGES.index(m)]
+        k = int(np.argmin(np.where(f < 1.5 * f0, s, np.inf)))
+        assert abs(f[k] - f0) <= tol, (m, f[k], f0)
+        assert s[k] < 0.06
+
+
+def test_integration_smear_is_a_box_of_t_int_over_t_lines(passes) -> None:
+    """The image moves one line per line period: an exposure of ``w T`` smears it over a box of
+    ``w`` lines along the track alone; lens and pixel aperture are the same both ways (the drum
+    is straight across the track and barely curved over a few rows), so
+    ``SFR_along / SFR_across = |sinc(w f)|``."""
+    f = SFR_FREQUENCY_CYC_PX
+    half = _bench(0.0, t_int_s=50e-6, irradiance_w_m2=80.0)
+    cases = {1.0: passes[0.0], 0.5: add_sharpness(run_pass(half, (1,), 1).dataset, half)}
+    for w, ds in cases.items():
+        ratio = ds["sfr_along"].sel(stage=1).values / ds["sfr_across"].sel(stage=1).values
+        want = np.abs(np.sinc(w * f))
+        assert np.abs(ratio - want)[f <= 0.4].max() < 0.015, w
+        assert np.abs(ratio - want)[f <= 0.5].max() < 0.04, w
+
+
+def test_along_track_mtf50_falls_with_stage_only_with_a_sync_error(passes) -> None:
+    with_err = passes[0.2]["mtf50_along"].values
+    assert np.all(np.diff(with_err) < 0), with_err
+    assert with_err[-1] < 0.6 * with_err[0]
+    without = passes[0.0]["mtf50_along"].values
+    assert np.all(np.isfinite(without))
+    np.testing.assert_allclose(without, without[0], rtol=0.01)
+
+
+def test_across_track_mtf50_does_not_depend_on_the_stage(passes) -> None:
+    for eps, ds in passes.items():
+        across = ds["mtf50_across"].values
+        assert np.all(np.isfinite(across))
+        np.testing.assert_allclose(across, np.median(across), rtol=0.03, err_msg=f"sync_error {eps}")
+        # across the track the pixel aperture is the sharpest part: above the along-track MTF50
+        assert np.all(across > ds["mtf50_along"].values[0])
+
+
+def test_gamma_hdr_and_variables(passes) -> None:
+    ds = passes[0.2]
+    assert ds["sfr_frequency"].attrs["units"] == "cycles/px"
+    for d in ("along", "across"):
+        assert ds[f"mtf50_{d}"].attrs["units"] == "cycles/px"
+        assert ds[f"sfr_{d}"].dims == ("stage", "sfr_frequency")
+        # Gamma_HDR of stages 2 and 16 comes from stage 16 where it does not clip: its SFR
+        hdr, stage16 = float(ds[f"gamma_hdr_mtf50_{d}"]), float(ds[f"mtf50_{d}"].sel(stage=16))
+        assert hdr == pytest.approx(stage16, rel=0.02)
+    edges = json.loads(ds.attrs["sfr_edges"])
+    assert {e[4] for e in edges} == {"vertical", "horizontal"}
+
+
+def test_noise_on_keeps_the_mtf50_and_clipped_stages_give_nan() -> None:
+    cfg = _bench(0.0, noise=True)
+    ds = add_sharpness(run_pass(cfg, (1, 16), 3).dataset, cfg)
+    quiet = add_sharpness(run_pass(_bench(0.0), (1, 16), 3).dataset, _bench(0.0))
+    for d in ("along", "across"):
+        np.testing.assert_allclose(ds[f"mtf50_{d}"].values, quiet[f"mtf50_{d}"].values, rtol=0.05)
+    bright = _bench(0.0, irradiance_w_m2=150.0)  # stage 16 clips the bright ground, stage 1 does not
+    clipped = add_sharpness(run_pass(bright, (1, 16), 3).dataset, bright)
+    assert np.isfinite(clipped["mtf50_along"].sel(stage=1))
+    assert np.isnan(clipped["mtf50_along"].sel(stage=16))
+
+
+def test_edge_rois_from_a_generated_target() -> None:
+    cfg = make_cfg(target={"layout": "slanted_edges", "panel_lines": 256, "panel_columns": 256,
+                           "edge_cell_px": 64, "texels_per_pixel": 1})
+    refl = slanted_edges(cfg.target, np.random.default_rng(0))
+    rois = slanted_edge_rois(refl, max_squares=100)
+    assert len(rois) == 4 * 16  # every square of the 4 x 4 cells lies inside the panel
+    assert [r.orientation for r in rois[:4]] == ["vertical", "vertical", "horizontal", "horizontal"]
+    assert len(slanted_edge_rois(refl, max_squares=3)) == 12
+    assert slanted_edge_rois(np.full((64, 64), 0.5)) == []
+    assert has_slanted_edges(cfg) and not has_slanted_edges(make_cfg())
+
+
+def test_sweep_columns_mtf50_of_the_fused_stages(passes) -> None:
+    from bench_sim.workflows.sweep.plan import COLUMNS
+    from bench_sim.workflows.sweep.point import _sharpness_columns
+
+    cfg = _bench(0.2)
+    ds = run_pass(cfg, (2, 16), 1).dataset  # the stages of a sweep point: mu1, mu2 and Gamma_HDR
+    rec = _sharpness_columns(cfg, ds)
+    assert set(rec) <= set(COLUMNS) and len(rec) == 6
+    full = passes[0.2]
+    for d in ("along", "across"):
+        assert rec[f"mtf50_{d}_gamma1"] == pytest.approx(float(full[f"mtf50_{d}"].sel(stage=2)), rel=1e-9)
+        assert rec[f"mtf50_{d}_gamma2"] == pytest.approx(float(full[f"mtf50_{d}"].sel(stage=16)), rel=1e-9)
+    assert rec["mtf50_along_gamma2"] < 0.6 * rec["mtf50_along_gamma1"]
+    assert _sharpness_columns(make_cfg(), ds) == dict.fromkeys(rec)  # no slanted edges: empty
+
+
+def test_written_with_the_simulation(passes, tmp_path) -> None:
+    import xarray as xr
+
+    from bench_sim.measure.sharpness import sharpness_summary
+    from bench_sim.workflows.simulate import write_simulation
+
+    ds = passes[0.2]
+    (tmp_path / "nc").mkdir()
+    (tmp_path / "tiff").mkdir()
+    write_simulation(ds, tmp_path / "nc", "netcdf", {"seed": 1})
+    with xr.open_dataset(tmp_path / "nc" / "simulation.nc") as back:
+        np.testing.assert_array_equal(back["mtf50_along"].values, ds["mtf50_along"].values)
+        assert back["sfr_across"].attrs["units"] == "1"
+    write_simulation(ds, tmp_path / "tiff", "tiff", {"seed": 1})
+    meta = json.loads((tmp_path / "tiff" / "meta.json").read_text())
+    summary = sharpness_summary(ds)
+    assert meta["mtf50_along_cyc_px"] == summary["mtf50_along_cyc_px"]
+    assert list(summary["mtf50_across_cyc_px"]) == [str(m) for m in STAGES]
+    assert sharpness_summary(ds.drop_vars(["mtf50_along"])) == {}

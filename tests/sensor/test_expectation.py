@@ -1,0 +1,128 @@
+"""Exact expectation of clipped reads and stage words (:mod:`bench_sim.sensor.expectation`) and
+``mean_dn`` of a pass: against the exact distribution of a read (Poisson electrons, full-well
+clip, normal read noise, rounding, ADC range), its exact ``m``-fold convolution, and the sample
+mean of ``dn`` over many seeds on clipped pixels (full-well, ADC and word clips; stages 1 and 80).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from bench_sim.pipeline import run_pass
+from bench_sim.sensor.expectation import (
+    EDGEWORTH_ERROR_BOUND_SD,
+    ReadModel,
+    clipped_normal_moments,
+    clipped_sum_mean,
+    read_cumulants,
+)
+from tests.conftest import tiny_cfg
+
+pytestmark = pytest.mark.physics
+
+K, FW, SIGMA, B = 0.072, 13500.0, 13.0, 20.0
+
+
+def _read_pmf(lam: float, top: int) -> np.ndarray:
+    """Exact P(v = d), d = 0 .. top, of one read (summed over the Poisson electrons)."""
+    sd = np.sqrt(lam)
+    n = np.arange(max(0, int(lam - 12 * sd)), int(lam + 12 * sd) + 1)
+    e = np.minimum(n, FW)
+    d = np.arange(top + 1)
+    edges = (np.append(d - 0.5, top + 0.5) - B) / K
+    cdf = stats.norm.cdf((edges[None, :] - e[:, None]) / SIGMA)
+    cdf[:, 0], cdf[:, -1] = 0.0, 1.0
+    return stats.poisson.pmf(n, lam) @ np.diff(cdf, axis=1)
+
+
+@pytest.mark.parametrize(("lam", "top", "hi"), [
+    (12000.0, 1023, None), (13300.0, 1023, None), (13500.0, 1023, None), (14200.0, 1023, None),  # full well
+    (6700.0, 511, None), (6900.0, 511, None),  # the ADC top (2**9 - 1) before the full well
+    (10900.0, 1023, 800.0), (11100.0, 1023, 800.0),  # a word clip folded into the read
+])
+def test_read_mean_and_variance_match_the_exact_distribution(lam, top, hi):
+    rm = ReadModel(K, FW, SIGMA, float(top), True)
+    k1, k2, _ = read_cumulants(np.array([lam]), 0.0, B, rm, hi_dn=hi)
+    p = _read_pmf(lam, top)
+    v = np.clip(np.arange(top + 1), 0, hi if hi is not None else top)
+    mean = (p * v).sum()
+    var = (p * v * v).sum() - mean**2
+    linear = K * lam + B
+    assert k1[0] == pytest.approx(mean, abs=2e-3)
+    assert k2[0] == pytest.approx(var, rel=0.02, abs=0.1)
+    if abs(linear - (hi or min(top, K * FW + B))) < 8:  # near the clip the linear mean is wrong
+        assert abs(linear - mean) > 0.5
+
+
+def test_clipped_normal_moments_against_quadrature():
+    x = np.linspace(-30, 30, 600001)
+    for mu, sd, lo, hi in [(3.0, 2.0, 0.0, 5.0), (-1.0, 0.5, 0.0, 10.0), (7.0, 3.0, -2.0, 8.0)]:
+        w = stats.norm.pdf(x, mu, sd)
+        c = np.clip(x, lo, hi)
+        got = clipped_normal_moments(np.array(mu), sd, lo, hi)
+        for k in (1, 2, 3):
+            assert float(got[k - 1]) == pytest.approx(np.trapezoid(w * c**k, x), rel=1e-6, abs=1e-6)
+
+
+@pytest.mark.parametrize(("m", "lam", "word"), [
+    (2, 13400.0, 1990.0), (2, 13000.0, 1935.0), (3, 13500.0, 2965.0),  # sums of full-well clipped reads
+    (10, 5599.0, 4095.0), (10, 5615.0, 4095.0), (80, 700.0, 4095.0), (80, 698.0, 4095.0),  # word at the mean
+])
+def test_stage_mean_matches_the_exact_convolution(m, lam, word):
+    """The word's clip of the sum of ``m`` reads: the Edgeworth step against the exact pmf of the
+    sum (the read's pmf convolved ``m`` times), within the documented bound."""
+    p = _read_pmf(lam, 1023)
+    size = 1024 * m
+    f = np.maximum(np.fft.irfft(np.fft.rfft(p, size) ** m, size), 0.0)
+    ped = 64.0
+    s = np.arange(size) - m * B + ped
+    exact = (f * np.clip(s, 0, word)).sum() / f.sum()
+    rm = ReadModel(K, FW, SIGMA, 1023.0, True)
+    k1, k2, k3 = read_cumulants(np.full(m, lam), 0.0, B, rm)
+    got = float(clipped_sum_mean(k1.sum() - m * B + ped, k2.sum(), k3.sum(), 0.0, word))
+    sd = np.sqrt(k2.sum())
+    assert abs(got - exact) <= EDGEWORTH_ERROR_BOUND_SD * sd
+    # the word sits within the sum's spread: neither the linear mean nor its clip is the answer
+    assert abs(min(k1.sum() - m * B + ped, word) - exact) > 5 * EDGEWORTH_ERROR_BOUND_SD * sd
+
+
+def _flat(irradiance: float, columns: int, lines: int, **sections):
+    base = {"lines": lines, "sensor": {"rows": 80, "columns": columns},
+            "target": {"layout": "uniform", "panel_columns": 16},
+            "lights": {"strong": {"enabled": False}, "weak": {"irradiance_w_m2": irradiance}},
+            "fusion": {"mu1": 1, "mu2": 80}}
+    for k, v in sections.items():
+        base[k] = {**base.get(k, {}), **v}
+    return tiny_cfg(**base)
+
+
+#: stage -> (columns, lines, seeds): stage 80 integrates 80 reads per pixel near the clip (slower)
+SIZES = {1: (16, 16, 16), 80: (4, 4, 8)}
+
+
+@pytest.mark.parametrize(("irradiance", "sections", "stage", "what"), [
+    (515.0, {"dtdi": {"beta_bits": 20}}, 1, "full well"),
+    (515.0, {"dtdi": {"beta_bits": 20}}, 80, "full well"),
+    (260.0, {"sensor": {"adc_bits": 9}, "dtdi": {"beta_bits": 20}}, 1, "ADC top"),
+    (260.0, {"sensor": {"adc_bits": 9}, "dtdi": {"beta_bits": 20}}, 80, "ADC top"),
+    (237.0, {"dtdi": {"beta_bits": 9}}, 1, "word"),
+    (26.7, {}, 80, "word"),
+])
+def test_mean_dn_is_the_sample_mean_of_dn_on_clipped_pixels(irradiance, sections, stage, what):
+    """Over many seeds (a new sensor and new noise each), ``dn - mean_dn`` averages to 0 within
+    5 standard errors on the pixels near the clip, where ``linear_dn`` is off by more than 5."""
+    columns, lines, seeds = SIZES[stage]
+    cfg = _flat(irradiance, columns, lines, **sections)
+    resid, lin_err = [], []
+    for seed in range(seeds):
+        d = run_pass(cfg, [stage], seed).dataset.sel(stage=stage)
+        near = d.clipped.values | (np.abs(d.mean_dn.values - d.linear_dn.values) > 0.01)
+        resid.append((d.dn.values.astype(np.float64) - d.mean_dn.values)[near])
+        lin_err.append((d.linear_dn.values - d.mean_dn.values)[near])
+    r = np.concatenate(resid)
+    assert r.size > 0.5 * seeds * columns * lines, what
+    se = r.std() / np.sqrt(r.size)
+    assert abs(r.mean()) < 5 * se + 1e-3, (what, r.mean(), se)
+    assert np.abs(np.concatenate(lin_err)).mean() > 5 * se, what
