@@ -42,7 +42,7 @@ docs-reference: setup
 
 # The physics tier alone: closed forms, invariants and seeded statistical tests (under 30 s)
 test-fast: setup
-	$(PY) -m pytest -m physics
+	$(PY) -m pytest -m "physics and not slow"
 
 # `pip install .` into a fresh venv, then `bench-sim reproduce --quick` from another folder
 install-check:

@@ -39,6 +39,7 @@ def _cfg(sensor: dict) -> object:
     return config_from_dict({"sensor": {"rows": 16, "columns": 64, **sensor}, "fusion": {"mu1": 2, "mu2": 8}})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(CAMERAS))
 def test_round_trip_recovers_the_sensor_within_the_reported_standard_errors(
     name: str, tmp_path: Path

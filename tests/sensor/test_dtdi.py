@@ -262,6 +262,7 @@ def _peak_bytes(n_lines: int) -> int:
     return peak
 
 
+@pytest.mark.slow
 def test_accumulator_memory_does_not_grow_with_lines() -> None:
     peak_1k = _peak_bytes(1_000)
     peak_10k = _peak_bytes(10_000)

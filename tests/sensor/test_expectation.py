@@ -104,9 +104,10 @@ SIZES = {1: (16, 16, 16), 80: (4, 4, 8)}
 
 @pytest.mark.parametrize(("irradiance", "sections", "stage", "what"), [
     (515.0, {"dtdi": {"beta_bits": 20}}, 1, "full well"),
-    (515.0, {"dtdi": {"beta_bits": 20}}, 80, "full well"),
+    pytest.param(515.0, {"dtdi": {"beta_bits": 20}}, 80, "full well", marks=pytest.mark.slow),
     (260.0, {"sensor": {"adc_bits": 9}, "dtdi": {"beta_bits": 20}}, 1, "ADC top"),
-    (260.0, {"sensor": {"adc_bits": 9}, "dtdi": {"beta_bits": 20}}, 80, "ADC top"),
+    pytest.param(260.0, {"sensor": {"adc_bits": 9}, "dtdi": {"beta_bits": 20}}, 80, "ADC top",
+                 marks=pytest.mark.slow),
     (237.0, {"dtdi": {"beta_bits": 9}}, 1, "word"),
     (26.7, {}, 80, "word"),
 ])

@@ -96,6 +96,7 @@ def test_writes_the_set_and_a_sensor_every_command_accepts(calibrated, tmp_path:
 
 
 @pytest.mark.physics
+@pytest.mark.slow
 def test_predicted_dr_agrees_with_the_chain_within_reproduces_scatter(calibrated) -> None:
     """The report's closed-form DTDI DR (EMVA saturation: the model's variance maximum) against the
     DR measured through sensor, DTDI and eq. 11 as ``reproduce`` measures it (three seeds: the
@@ -115,6 +116,7 @@ def test_predicted_dr_agrees_with_the_chain_within_reproduces_scatter(calibrated
 
 
 @pytest.mark.physics
+@pytest.mark.slow
 @REFERENCE_WARNINGS
 def test_agrees_with_the_emva1288_package_on_the_same_descriptor(tmp_path: Path) -> None:
     """bench_sim's weighted fit and the reference implementation's on ptc's descriptor (a
@@ -132,6 +134,7 @@ def test_agrees_with_the_emva1288_package_on_the_same_descriptor(tmp_path: Path)
 
 
 @pytest.mark.physics
+@pytest.mark.slow
 @REFERENCE_WARNINGS
 @pytest.mark.parametrize(("bits", "k", "seed"), [(12, 0.4, 3), (10, 0.1, 5)])
 def test_agrees_with_the_emva1288_package_on_its_own_camera_simulator(
@@ -237,3 +240,35 @@ def test_reproduce_quick_runs_on_the_calibrated_sensor(calibrated, tmp_path: Pat
     assert run.exit_code == 0, run.output
     metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert set(metrics["dr_db"]) == {"gamma1", "gamma2", "gamma_hdr"}
+
+
+def test_sweep_and_dataset_run_on_the_calibrated_sensor(calibrated, tmp_path: Path) -> None:
+    """The calibrated ``sensor.toml`` as the base of a one-point sweep and a one-sample data set."""
+    out, res = calibrated
+    bench = tmp_path / "bench.toml"
+    bench.write_text(
+        f'base = "{(out / "sensor.toml").as_posix()}"\nlines = 16\n[sensor]\nrows = 12\ncolumns = 48\n'
+        "[target]\npanel_lines = 48\npanel_columns = 48\n[render]\nspp = 4\nsubpixels = 2\n"
+        "[fusion]\nmu1 = 2\nmu2 = 8\n"
+    )
+    (tmp_path / "sweep.toml").write_text(
+        'name = "cal"\nbase = "bench.toml"\nseed = 1\n[[parameters]]\n'
+        'key = "lights.strong.irradiance_w_m2"\nvalues = [64.0]\n'
+    )
+    run = runner.invoke(app, ["sweep", str(tmp_path / "sweep.toml"), "--out", str(tmp_path / "sw"),
+                              "--workers", "0", "--no-plots"])
+    assert run.exit_code == 0, run.output
+    points = (tmp_path / "sw" / "points.csv").read_text().splitlines()
+    assert len(points) == 2 and ",ok," in points[1]
+    (tmp_path / "ds.toml").write_text(
+        'name = "cal"\nbase = "bench.toml"\nsamples = 1\nseed = 2\nstages = [2, 8]\nlines = 16\n'
+        'columns = 48\n[randomize]\n'
+        '"lights.weak.irradiance_w_m2" = { dist = "uniform", low = 2.0, high = 8.0 }\n'
+    )
+    run = runner.invoke(app, ["dataset", str(tmp_path / "ds.toml"), "--out", str(tmp_path / "ds"),
+                              "--workers", "0"])
+    assert run.exit_code == 0, run.output
+    ds = bench_sim.dataset.open(tmp_path / "ds")
+    assert ds.sizes["sample"] == 1
+    assert float(ds.attrs.get("sensor_full_well_e", res["sensor"]["full_well_e"])) == pytest.approx(
+        res["sensor"]["full_well_e"])

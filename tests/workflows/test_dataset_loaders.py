@@ -90,6 +90,7 @@ def test_three_epochs_every_sample_once_splits_disjoint_and_stable(fixed):
 
 
 @pytest.mark.physics
+@pytest.mark.slow
 def test_noise_std_matches_temporal_std_of_repeated_samples(fixed):
     mean_dn, dn = _stack(fixed, "mean_dn"), _stack(fixed, "dn").astype(np.float64)
     std, clipped = _stack(fixed, "noise_std_dn"), _stack(fixed, "clipped")
@@ -110,6 +111,7 @@ def test_noise_std_matches_temporal_std_of_repeated_samples(fixed):
 
 
 @pytest.mark.physics
+@pytest.mark.slow
 def test_gamma_hdr_truth_is_eq11_of_the_stage_truth_and_the_mean_of_gamma_hdr(fixed):
     info = bench_sim.dataset.read_info(fixed)
     beta, ped = 12, 64.0

@@ -83,6 +83,7 @@ def sweep(tmp_path_factory) -> Path:
 
 
 @pytest.mark.physics
+@pytest.mark.slow
 def test_banding_table_follows_the_sinc_prediction_with_its_nulls(sweep):
     table = pd.read_csv(sweep / "points_images.csv")
     stages = table[table.image != "gamma_hdr"]
