@@ -97,8 +97,8 @@ def _dr_gains(r: ReproduceResult) -> list[str]:
         f"- **Gain over the better input (by measured DR), {_NAMES[better]}: {gain_better:.2f} dB** "
         f"(sensor model: {model_g:.2f} dB; DR {_NAMES['gamma1']} {d.dr_db['gamma1']:.2f} dB, "
         f"{_NAMES['gamma2']} {d.dr_db['gamma2']:.2f} dB). "
-        f"Gain over Gamma1: {d.delta_dr_db_vs_gamma1:.2f} dB. "
-        f"Gamma_HDR keeps Gamma1's saturation end and takes the dark end from stage {mu2}; each row "
+        + ("" if better == "gamma1" else f"Gain over Gamma1: {d.delta_dr_db_vs_gamma1:.2f} dB. ")
+        + f"Gamma_HDR keeps Gamma1's saturation end and takes the dark end from stage {mu2}; each row "
         f"is read and digitised on its own, so read noise adds up as sqrt(m) in the digital sum and "
         f"the noise floor drops by about sqrt({mu2}/{mu1}), i.e. about 10 lg({mu2}/{mu1}) = "
         f"{10 * math.log10(mu2 / mu1):.2f} dB, not 20 lg.",
