@@ -1,0 +1,118 @@
+"""A/B support for the benchmarks: run a command of this checkout and of another git revision.
+
+The other revision (default :data:`BASELINE_REV`, the main branch before the speed work of
+this round) is exported once with ``git archive`` into a cache folder and run with this
+checkout's virtual environment, its package first on ``PYTHONPATH``, so both sides use the same
+libraries. Runs are paired and interleaved (A, B, A, B, ...) so that a change of the machine's
+load hits both sides alike; medians and their ratio are printed with the load average.
+
+Usage from a benchmark::
+
+    from baseline import add_baseline_args, Side, paired, load_line
+
+    sides = [Side.current(), Side.of_rev(args.baseline)]
+    times = paired(sides, lambda side: side.bench_sim("reproduce", "--out", tmp), repeat=3)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: main before the speed work (issue 26): the "today" of its targets
+BASELINE_REV = "63156ef"
+_CACHE = Path(tempfile.gettempdir()) / "bench_sim_baselines"
+
+
+def add_baseline_args(ap: argparse.ArgumentParser) -> None:
+    """``--baseline REV`` (default :data:`BASELINE_REV`) and ``--no-baseline``."""
+    ap.add_argument("--baseline", default=BASELINE_REV, help="git revision to compare with")
+    ap.add_argument("--no-baseline", action="store_true", help="time this checkout only")
+
+
+def export_tree(rev: str) -> Path:
+    """The package tree of ``rev`` (exported once, cached under the temp folder)."""
+    sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", rev], check=True, capture_output=True,
+                         text=True).stdout.strip()
+    tree = _CACHE / sha[:12]
+    if not (tree / "bench_sim" / "__init__.py").exists():
+        tree.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", sha], check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+    return tree
+
+
+@dataclass(frozen=True)
+class Side:
+    """One side of an A/B comparison: a name and the ``PYTHONPATH`` that selects its package."""
+
+    name: str
+    tree: Path | None
+
+    @classmethod
+    def current(cls) -> Side:
+        return cls("this checkout", None)
+
+    @classmethod
+    def of_rev(cls, rev: str) -> Side:
+        return cls(f"baseline {rev}", export_tree(rev))
+
+    def env(self, **extra: str) -> dict[str, str]:
+        env = dict(os.environ, **extra)
+        if self.tree is not None:
+            env["PYTHONPATH"] = str(self.tree)
+        else:
+            env.pop("PYTHONPATH", None)
+        return env
+
+    def python(self, *args: str, cwd: Path | None = None, **env: str) -> tuple[float, float]:
+        """Run ``python args`` of this side; wall time and CPU time [s] (the process and its children)."""
+        return timed_process([sys.executable, *args], self.env(**env), cwd=cwd)
+
+    def bench_sim(self, *args: str, cwd: Path | None = None, **env: str) -> tuple[float, float]:
+        """Run ``bench-sim args`` of this side (as ``python -m bench_sim``)."""
+        return self.python("-m", "bench_sim", *args, cwd=cwd, **env)
+
+
+def timed_process(argv: Sequence[str], env: dict[str, str], cwd: Path | None = None) -> tuple[float, float]:
+    """Wall and CPU (user + system of the process and its children) seconds of one process."""
+    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    done = subprocess.run(list(argv), env=env, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                          text=True)
+    wall = time.perf_counter() - t0
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(argv)} exited {done.returncode}: {done.stderr[-2000:]}")
+    return wall, (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)
+
+
+def paired(sides: Sequence[Side], run: Callable[[Side, int], tuple[float, float]], repeat: int
+           ) -> dict[str, list[tuple[float, float]]]:
+    """``run(side, i)`` for every side, interleaved ``repeat`` times; (wall, CPU) per side."""
+    out: dict[str, list[tuple[float, float]]] = {s.name: [] for s in sides}
+    for i in range(repeat):
+        for side in sides:
+            out[side.name].append(run(side, i))
+    return out
+
+
+def median(values: Sequence[float]) -> float:
+    return float(statistics.median(values))
+
+
+def load_line() -> str:
+    """The 1, 5 and 15 minute load averages and the number of CPUs, one line."""
+    one, five, fifteen = os.getloadavg()
+    return f"load average {one:.2f} {five:.2f} {fifteen:.2f} on {os.cpu_count()} CPUs"
