@@ -33,15 +33,15 @@ class BenchConfig(Section):
     lines: Annotated[int, Field(ge=1, le=1_000_000)] = Field(
         1024, description="scene lines (output image height) of a default run"
     )
-    drum: DrumConfig = DrumConfig()
-    lens: LensConfig = LensConfig()
-    target: TargetConfig = TargetConfig()
-    lights: LightsConfig = LightsConfig()
-    sensor: SensorConfig = SensorConfig()
-    timing: TimingConfig = TimingConfig()
-    dtdi: DTDIConfig = DTDIConfig()
-    render: RenderConfig = RenderConfig()
-    fusion: FusionConfig = FusionConfig()
+    drum: DrumConfig = Field(default_factory=DrumConfig)
+    lens: LensConfig = Field(default_factory=LensConfig)
+    target: TargetConfig = Field(default_factory=TargetConfig)
+    lights: LightsConfig = Field(default_factory=LightsConfig)
+    sensor: SensorConfig = Field(default_factory=SensorConfig)
+    timing: TimingConfig = Field(default_factory=TimingConfig)
+    dtdi: DTDIConfig = Field(default_factory=DTDIConfig)
+    render: RenderConfig = Field(default_factory=RenderConfig)
+    fusion: FusionConfig = Field(default_factory=FusionConfig)
 
     @model_validator(mode="after")
     def _cross(self) -> BenchConfig:

@@ -205,8 +205,8 @@ class LightsConfig(Section):
     model_config = ConfigDict(extra="allow", frozen=True, validate_default=True)
     __pydantic_extra__: dict[str, _AnyLight] = Field(init=False)
 
-    strong: SpotLightConfig = SpotLightConfig()
-    weak: FillLightConfig = FillLightConfig()
+    strong: SpotLightConfig = Field(default_factory=SpotLightConfig)
+    weak: FillLightConfig = Field(default_factory=FillLightConfig)
 
     @model_validator(mode="before")
     @classmethod

@@ -61,7 +61,9 @@ class Section(BaseModel):
     """Base of every config section: unknown keys refused, immutable, and every float finite
     (``allow_inf_nan=False`` applies to floats anywhere in a section, in tuples too)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False, defer_build=True
+    )
 
 
 
