@@ -36,6 +36,7 @@ from typer.core import TyperGroup
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, load_config
 from bench_sim.errors import BenchSimError, kept_note
+from bench_sim.fusion.methods import FUSE_METHODS
 from bench_sim.fusion.tonemap import TONEMAP_METHODS
 from bench_sim.io import format_bytes
 from bench_sim.runtime.backend import choose_backend, versions
@@ -330,18 +331,24 @@ def fuse(
         float | None,
         typer.Option(
             "--pedestal",
-            help="offset [DN] the stage words carry, subtracted before eq. 11 (default: the "
+            help="offset [DN] the stage words carry, subtracted before fusing (default: the "
             "dtdi.pedestal_dn of bench_sim's own images, from their metadata; else 0, a plain word)",
             show_default=False,
         ),
     ] = None,
+    method: Annotated[
+        str, typer.Option("--method", help=" | ".join(FUSE_METHODS) + ": eq11 = the paper's rule; "
+                          "clip = the highest stage whose word is below its clip")
+    ] = "eq11",
 ) -> None:
-    """Fuse two stage images with the paper's rule (eq. 11)."""
+    """Fuse two stage images: the paper's rule (eq. 11) or the clip-aware rule (--method)."""
     meta = fuse_workflow.fuse_files(
         low, high, mu1=mu1, mu2=mu2, beta=beta, out=out, tra=tra, tra_method=tra_method,
-        pedestal_dn=pedestal,
+        pedestal_dn=pedestal, method=method,
     )
-    print(f"pedestal subtracted: {meta['pedestal_source']}; wrote {out}" + (f" and {tra}" if tra else ""))
+    print(f"method {meta['method']}; pedestal subtracted: {meta['pedestal_source']}; "
+          f"{meta['pixels_from_clipped_high']} pixels from a clipped Gamma2; wrote {out}"
+          + (f" and {tra}" if tra else ""))
 
 
 @app.command()

@@ -1,6 +1,7 @@
 """Fusion stage: stage images [DN] -> HDR image [DN, top-stage units] -> display image.
 
 * :mod:`bench_sim.fusion.paper` - the paper's rule, eq. 11 (:func:`fuse_dtdi_hdr_eq11`).
+* :mod:`bench_sim.fusion.methods` - the two-stage rules by name (``eq11``, ``clip``), :data:`FUSE_METHODS`.
 * :mod:`bench_sim.fusion.multistage` - more than two stages (highest unsaturated stage) and the
   inverse-variance merge.
 * :mod:`bench_sim.fusion.classic` - Debevec-Malik and Mertens merges from OpenCV, for comparison.
@@ -9,6 +10,7 @@
 
 from bench_sim.fusion.classic import merge_debevec_opencv, merge_mertens_opencv
 from bench_sim.fusion.common import FusionResult
+from bench_sim.fusion.methods import FUSE_METHODS, check_fuse_method, fuse_pair
 from bench_sim.fusion.multistage import (
     fuse_stages_highest_unsaturated,
     fuse_stages_inverse_variance,
@@ -18,6 +20,9 @@ from bench_sim.fusion.tonemap import TONEMAP_METHODS, gamma_tra, quantize_displa
 
 __all__ = [
     "FusionResult",
+    "FUSE_METHODS",
+    "check_fuse_method",
+    "fuse_pair",
     "eq11_threshold_dn",
     "fuse_dtdi_hdr_eq11",
     "fuse_stages_highest_unsaturated",

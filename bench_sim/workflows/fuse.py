@@ -1,4 +1,5 @@
-"""Fuse two stage images from files with the paper's rule (eq. 11): ``bench-sim fuse``.
+"""Fuse two stage images from files: ``bench-sim fuse``, by the paper's rule (eq. 11) or the
+clip-aware rule (``--method``, :data:`bench_sim.fusion.methods.FUSE_METHODS`).
 
 Inputs: two single-channel stage images of the same shape, 16-bit (or 8-bit) TIFF/PNG, EXR or
 NPY (read by :func:`bench_sim.io.read_image`). They must hold **integer** DN values in
@@ -12,8 +13,11 @@ written under temporary names and renamed into place together, so a failure leav
 
 * ``out`` (``.exr``): channel ``Y`` = ``Gamma_HDR`` [DN, stage-``mu2`` units, float32; exact for
   values below ``2**24``], channel ``source`` = the stage (``mu1`` or ``mu2``) each pixel came
-  from; header attribute ``bench_sim`` (JSON): inputs (path, SHA-256, shape), ``mu1``, ``mu2``,
-  ``beta``, ``Phi_FS``, the eq. 11 threshold, full scale, counts, units and the package version.
+  from; header attribute ``bench_sim`` (JSON): inputs (path, SHA-256, shape), the rule
+  (``method``: ``eq11`` or ``clip``, and ``method_description``), ``mu1``, ``mu2``, ``beta``,
+  ``Phi_FS``, the eq. 11 threshold, full scale, counts (among them
+  ``pixels_from_clipped_high``: pixels taken from a ``Gamma2`` at its word's clip), units and
+  the package version.
 * ``tra`` (``.png``, optional): ``Gamma_TRA``, 8-bit, transform ``tra_method`` (default
   ``"log"``, see :mod:`bench_sim.fusion.tonemap`) over the HDR full scale
   ``(mu2/mu1) * (2**beta - 1)``; metadata in a text chunk.
@@ -34,7 +38,8 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError
 from bench_sim.fusion.common import FusionResult
-from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
+from bench_sim.fusion.methods import FUSE_METHODS, check_fuse_method, fuse_pair
+from bench_sim.fusion.paper import eq11_threshold_dn
 from bench_sim.fusion.tonemap import TONEMAP_METHODS, gamma_tra
 from bench_sim.io import (
     check_output_file,
@@ -168,12 +173,15 @@ def _hdr_meta(
     mu2: int,
     beta: int,
     pedestal_dn: float,
+    method: str,
 ) -> dict[str, Any]:
-    """The ``bench_sim`` attribute of the HDR EXR: inputs (path, SHA-256, shape), stages, word,
-    eq. 11 threshold, full scale, counts, units and the package version."""
+    """The ``bench_sim`` attribute of the HDR EXR: inputs (path, SHA-256, shape), the rule,
+    stages, word, eq. 11 threshold, full scale, counts, units and the package version."""
+    g2 = inputs["high"][1]
     return {
         "kind": "Gamma_HDR",
-        "method": "paper eq. 11 (fuse_dtdi_hdr_eq11)",
+        "method": method,
+        "method_description": FUSE_METHODS[method],
         "version": __version__,
         "inputs": {
             k: {"path": str(p), "sha256": sha256_file(p), "shape": list(g.shape)}
@@ -193,6 +201,9 @@ def _hdr_meta(
         },
         "pixels_from_low": int(np.count_nonzero(result.source == mu1)),
         "pixels_saturated": int(np.count_nonzero(result.saturated)),
+        "pixels_from_clipped_high": int(
+            np.count_nonzero((result.source == mu2) & (g2 >= 2**beta - 1))
+        ),
     }
 
 
@@ -217,6 +228,7 @@ def _write_outputs(
                 "X_full_scale_dn": result.full_scale_dn,
                 "bits": 8,
                 "hdr": str(out_p),
+                "method": meta["method"],
                 "mu1": meta["mu1"],
                 "mu2": meta["mu2"],
                 "beta": meta["beta"],
@@ -236,8 +248,10 @@ def fuse_files(
     tra: str | os.PathLike[str] | None = None,
     tra_method: str = "log",
     pedestal_dn: float | None = None,
+    method: str = "eq11",
 ) -> dict[str, Any]:
-    """Read two stage images, fuse them with eq. 11, write the HDR EXR (and ``Gamma_TRA`` PNG).
+    """Read two stage images, fuse them (eq. 11 or the clip-aware rule), write the HDR EXR (and
+    the ``Gamma_TRA`` PNG).
 
     Parameters
     ----------
@@ -262,6 +276,9 @@ def fuse_files(
         (the default): the ``dtdi.pedestal_dn`` the inputs' bench_sim metadata name, else 0
         (:func:`bench_sim.workflows.pedestal.default_pedestal_dn`); the returned
         ``pedestal_source`` says which.
+    method
+        Fusion rule, one of :data:`~bench_sim.fusion.methods.FUSE_METHODS`: ``"eq11"`` (the
+        paper's, default) or ``"clip"`` (the highest stage whose word is below its clip).
 
     Returns
     -------
@@ -273,6 +290,7 @@ def fuse_files(
     BenchSimError
         Any bad option or input (one line); nothing is written then.
     """
+    method = check_fuse_method(method, "--method")  # before any work
     low_p, high_p, out_p = Path(low), Path(high), Path(out)
     tra_p = Path(tra) if tra is not None else None
     if pedestal_dn is None:
@@ -286,9 +304,11 @@ def fuse_files(
     check_resources(estimate_fuse(max(shapes.values(), key=math.prod), tra_p is not None), out_p.parent)
 
     g1, g2 = _read_stages(low_p, high_p, mu1, mu2, beta)
-    result = fuse_dtdi_hdr_eq11(g1, g2, mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=float(pedestal_dn))
+    result = fuse_pair(g1, g2, method=method, mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=float(pedestal_dn))
     display = gamma_tra(result.hdr, tra_method, full_scale_dn=result.full_scale_dn) if tra_p else None
-    meta = _hdr_meta({"low": (low_p, g1), "high": (high_p, g2)}, result, mu1, mu2, beta, pedestal_dn)
+    meta = _hdr_meta(
+        {"low": (low_p, g1), "high": (high_p, g2)}, result, mu1, mu2, beta, pedestal_dn, method
+    )
     meta["pedestal_source"] = pedestal_source
     _write_outputs(out_p, tra_p, result, meta, tra_method, display)
     return {**meta, "out": str(out_p), "tra": str(tra_p) if tra_p else None}

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from bench_sim.cli import app
-from bench_sim.fusion import fuse_dtdi_hdr_eq11
+from bench_sim.fusion import FUSE_METHODS, fuse_dtdi_hdr_eq11, fuse_pair
 from bench_sim.io import read_image, write_exr, write_png
 
 runner = CliRunner()
@@ -92,6 +92,35 @@ def test_fuse_pedestal_keeps_the_noise_free_response_linear(tmp_path: Path, pede
         _fuse(*args, "--out", str(tmp_path / "n.exr"))
         plain, _ = _exr(tmp_path / "n.exr")
         assert plain["Y"][0, 0] - 8 * s1[0, 0] == pedestal  # the offset left in
+
+
+@pytest.mark.parametrize("method", list(FUSE_METHODS))
+def test_fuse_method_is_applied_and_recorded(tmp_path: Path, method: str) -> None:
+    """``--method``: the file is that rule's fusion (pedestal 64 removed) and says which rule."""
+    s = np.linspace(0.0, 100.0, 240)[None, :]  # signal per row over rows 0..9 [DN]
+    g1 = np.minimum(np.round(10 * s) + 64, 4095)
+    g2 = np.minimum(np.round(150 * s) + 64, 4095)  # light doubles after row 10: Gamma2 = 15 Gamma1
+    np.save(tmp_path / "low.npy", g1.astype(np.int32))
+    np.save(tmp_path / "high.npy", g2.astype(np.int32))
+    args = [str(tmp_path / "low.npy"), str(tmp_path / "high.npy"), "--pedestal", "64"]
+    r = _fuse(*args, "--method", method, "--out", str(tmp_path / "m.exr"), "--tra", str(tmp_path / "m.png"))
+    assert r.exit_code == 0, r.stderr  # type: ignore[attr-defined]
+    channels, meta = _exr(tmp_path / "m.exr")
+    want = fuse_pair(g1, g2, method=method, mu1=10, mu2=80, beta=12, pedestal_dn=64.0)
+    np.testing.assert_array_equal(channels["Y"], want.hdr.astype(np.float32))
+    assert meta["method"] == method and meta["method_description"] == FUSE_METHODS[method]
+    n_clipped = int(((want.source == 80) & (g2 >= 4095)).sum())
+    assert meta["pixels_from_clipped_high"] == n_clipped
+    assert (n_clipped > 0) == (method == "eq11")  # the clip rule never takes a clipped Gamma2
+    assert f"method {method};" in r.stdout and f"{n_clipped} pixels from a clipped Gamma2" in r.stdout  # type: ignore[attr-defined]
+
+
+def test_fuse_unknown_method_fails_before_any_work(tmp_path: Path) -> None:
+    # the inputs do not even exist: the method is checked first
+    before = {p.name for p in tmp_path.iterdir()}
+    r = _fuse(str(tmp_path / "nope1.tif"), str(tmp_path / "nope2.tif"), "--method", "median",
+              "--out", str(tmp_path / "o.exr"))
+    _assert_clean_failure(r, tmp_path, before, "--method = 'median'", "allowed eq11, clip")
 
 
 def test_fuse_npy_and_exr_inputs_and_determinism(tmp_path: Path) -> None:

@@ -8,9 +8,16 @@ For every flickering, emitting light of a point and every image (each stage the 
 ``point``, ``image``, ``stage``  the point; ``stage_MMM`` or ``gamma_hdr`` (``stage``: ``m``, or ``mu2``)
 ``light``, ``flicker_hz``   the light and its frequency [Hz]
 ``cycles_per_line``         its frequency along the track, folded into ``0 .. 0.5``
-``amplitude``, ``phase_rad``  measured: :func:`bench_sim.metrics.flicker_theory.banding_phasor` of
-                            the image's illumination profile (stages: the truth ``photons /
-                            reflectance``, noise-free; ``gamma_hdr``: the fused image ``/ reflectance``)
+``amplitude``, ``phase_rad``  measured: :func:`bench_sim.metrics.banding.flat_banding` (no floor
+                            from the target: only pixels whose target is flat around them, each
+                            column fitted on its own, the columns' phasors weighted by their share
+                            of the line profile) of the stage's noise-free truth ``photons``, or of
+                            the fused image (``gamma_hdr``; its saturated pixels left out), both
+                            against the stage's truth ``reflectance``
+``amplitude_sd``            the measured amplitude's standard error from the fits' residuals:
+                            on ``gamma_hdr`` (noisy) a null reads below ``4 amplitude_sd`` but
+                            for a chance of 3e-4; on the noise-free truth the residuals are
+                            rounding (a null reads ~1e-9) and a waveform's harmonics
 ``predicted_amplitude``, ``predicted_phase_rad``  :func:`~bench_sim.metrics.flicker_theory.predicted_banding`
                             (``gamma_hdr``: the stages' phasors weighted by the share of the profile
                             each source stage makes, its ``mu1`` part scaled by ``mu2 / mu1``)
@@ -32,28 +39,39 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.io import write_csv
-from bench_sim.metrics.flicker_theory import banding_phasor, predicted_banding
+from bench_sim.metrics.banding import FlatBanding, flat_banding
+from bench_sim.metrics.flicker_theory import predicted_banding
 from bench_sim.rig.geometry import rig_geometry
 from bench_sim.rig.lights import flicker_fundamental
 
-__all__ = ["IMAGES_CSV", "IMAGE_COLUMNS", "banding_rows", "write_points_images"]
+__all__ = [
+    "IMAGES_CSV", "IMAGE_COLUMNS", "banding_rows", "flat_half_lines", "stage_banding", "write_points_images",
+]
 
 IMAGES_CSV = "points_images.csv"
 #: columns of ``points_images.csv`` -> units
 IMAGE_COLUMNS: dict[str, str] = {
     "point": "1", "image": "1", "stage": "1", "light": "1", "flicker_hz": "Hz", "cycles_per_line": "1",
-    "amplitude": "1", "phase_rad": "rad", "predicted_amplitude": "1", "predicted_phase_rad": "rad",
-    "alone": "1",
+    "amplitude": "1", "phase_rad": "rad", "amplitude_sd": "1", "predicted_amplitude": "1",
+    "predicted_phase_rad": "rad", "alone": "1",
 }
 #: waveform -> phase of its fundamental relative to ``flicker_phase_rad`` [rad]
 _FUNDAMENTAL_PHASE = {"sine": 0.0, "rectified_sine": -0.5 * math.pi}
 
 
-def _profile(values: np.ndarray, reflectance: np.ndarray) -> np.ndarray:
-    v = np.asarray(values, dtype=np.float64)
-    r = np.asarray(reflectance, dtype=np.float64)
-    ratio = np.divide(v, r, out=np.full(v.shape, np.nan), where=r > 0)
-    return np.nanmean(ratio, axis=1)
+def flat_half_lines(cfg: BenchConfig, stage: int) -> int:
+    """The flatness window's half height [lines] for stage ``m``: the pixel and its smear (1)
+    plus the walk of its ``m`` row footprints under the sync error ``e``, ``ceil(|e| (m - 1))``."""
+    return 1 + math.ceil(abs(float(cfg.timing.sync_error)) * (int(stage) - 1) - 1e-9)
+
+
+def stage_banding(cfg: BenchConfig, ds: Any, stage: int, cycles_per_line: float) -> FlatBanding:
+    """The banding of stage ``m``'s noise-free truth ``photons`` against its ``reflectance``
+    (:func:`bench_sim.metrics.banding.flat_banding`): the estimator without the target's floor."""
+    return flat_banding(
+        ds["photons"].sel(stage=stage).values, ds["reflectance"].sel(stage=stage).values,
+        cycles_per_line, half_lines=flat_half_lines(cfg, stage),
+    )
 
 
 def _prediction(cfg: BenchConfig, name: str, m: int) -> tuple[float, complex]:
@@ -98,19 +116,19 @@ def banding_rows(
                 "alone": len(emitting) == 1}
         for m in stages:
             nu, pred = _prediction(cfg, name, m)
-            amp, phase = banding_phasor(
-                _profile(ds["photons"].sel(stage=m).values, ds["reflectance"].sel(stage=m).values), nu
-            )
+            fb = stage_banding(cfg, ds, m, nu)
             rows.append({**base, "image": f"stage_{m:03d}", "stage": m, "cycles_per_line": nu,
-                         "amplitude": amp, "phase_rad": phase, "predicted_amplitude": abs(pred),
-                         "predicted_phase_rad": cmath.phase(pred)})
+                         "amplitude": fb.amplitude, "phase_rad": fb.phase_rad, "amplitude_sd": fb.sd,
+                         "predicted_amplitude": abs(pred), "predicted_phase_rad": cmath.phase(pred)})
         mu2 = cfg.fusion.mu2
         nu = _prediction(cfg, name, mu2)[0]
-        amp, phase = banding_phasor(_profile(fused.hdr, ds["reflectance"].sel(stage=mu2).values), nu)
+        hdr = np.where(np.asarray(fused.saturated), np.nan, np.asarray(fused.hdr, dtype=np.float64))
+        fb = flat_banding(hdr, ds["reflectance"].sel(stage=mu2).values, nu,
+                          half_lines=flat_half_lines(cfg, mu2))
         pred = _hdr_prediction(cfg, name, ds, fused)
-        rows.append({**base, "image": "gamma_hdr", "stage": mu2, "cycles_per_line": nu, "amplitude": amp,
-                     "phase_rad": phase, "predicted_amplitude": abs(pred),
-                     "predicted_phase_rad": cmath.phase(pred)})
+        rows.append({**base, "image": "gamma_hdr", "stage": mu2, "cycles_per_line": nu,
+                     "amplitude": fb.amplitude, "phase_rad": fb.phase_rad, "amplitude_sd": fb.sd,
+                     "predicted_amplitude": abs(pred), "predicted_phase_rad": cmath.phase(pred)})
     return rows
 
 
