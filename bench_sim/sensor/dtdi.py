@@ -39,16 +39,19 @@ word: the configured ``dtdi.pedestal_dn`` (default 64 DN, the default of
 the paper's plain word). It keeps the dark signal's noise above 0 DN, so the word does not clip
 it and dark statistics stay unbiased (EMVA 1288 also requires an unclipped dark signal); every
 consumer subtracts it (:func:`bench_sim.sensor.model.stage_offset_dn`). The sum is
-formed in float64, exact for integer DN (``2**53`` is far above any sum of 16-bit rows), so the
-order of summation does not matter and the streaming and direct forms agree bit for bit.
+exact for integer DN: :func:`dtdi_direct` forms it in float64 (``2**53`` is far above any sum of
+16-bit rows), :class:`DTDIAccumulator` in ``uint32`` for words of up to 16 bits (``int64`` for
+other integers), so the streaming and direct forms agree bit for bit. Non-integer DN are summed
+in float64 by both, row ``0`` first, in the same order.
 
 Noise: every row is read (and its read noise and quantisation noise added) independently, so
 unlike charge-domain TDI the temporal dark noise of stage ``m`` grows as ``sqrt(m)``. Fixed
 patterns of a column (the column amplifier offset, and the PRNU/DSNU of the ``m`` summed pixels)
 are the same for every line, so they add coherently (the column offset as ``m`` times).
 
-Memory: :class:`DTDIAccumulator` keeps a ring of ``max(stages)`` partial line sums of ``N``
-columns, ``O(M * N)``, independent of the number of lines.
+Memory: :class:`DTDIAccumulator` keeps the ``max(stages) - 1`` partial line sums of ``N``
+columns (in a buffer of a few chunks more), ``O((M + C) * N)`` for chunks of ``C`` frames,
+independent of the number of lines.
 
 References
 ----------
@@ -136,7 +139,9 @@ def _finish(
 ) -> np.ndarray:
     """Raw row sums -> stored words: subtract m*b, add the pedestal, round, clip (eq. 4)."""
     shift = float(pedestal_dn) - (stage * float(black_offset_dn) if subtract_black else 0.0)
-    val = sums + shift if shift != 0.0 else sums.copy()
+    val = sums.astype(np.float64)  # exact for the integer sums of the accumulator
+    if shift != 0.0:
+        val += shift
     np.rint(val, out=val)
     np.clip(val, 0.0, float(word_clip_dn(beta_bits)), out=val)
     return val.astype(np.uint32)
@@ -205,8 +210,9 @@ def dtdi_direct(
 class DTDIAccumulator:
     """Streaming DTDI: push frames one by one (or in chunks), get stage lines as they complete.
 
-    Keeps a ring of ``R = max(stages)`` partial sums, one per scene line under the used rows,
-    so its memory is ``O(R * N)`` whatever the number of lines. After frame ``k`` (0-based) is
+    Keeps the ``R - 1`` partial sums (``R = max(stages)``) of the scene lines still under the
+    used rows, in a buffer that a chunk of ``C`` frames extends by ``C`` new lines, so its memory
+    is ``O((R + C) * N)`` whatever the number of lines. After frame ``k`` (0-based) is
     pushed, the line ``j = k - m + 1`` of every requested stage ``m`` is complete (if ``j >= 0``)
     and is returned; so stage ``m`` produces lines ``0, 1, 2, ...`` in order, one per frame, from
     frame ``m - 1`` on. Partial lines (see the module docstring) are never returned.
@@ -241,31 +247,48 @@ class DTDIAccumulator:
         self.subtract_black = bool(subtract_black)
         self.pedestal_dn = stage_pedestals(pedestal_dn, self.stages)
         self.ring_rows = self.stages[-1]
-        self._ring = np.zeros((self.ring_rows, self.n_columns), dtype=np.float64)
-        self.frames_seen = 0
+        self.reset()
 
     def reset(self) -> None:
         """Forget every partial line (start a new pass)."""
-        self._ring.fill(0.0)
+        # rows _origin .. _origin + R - 2 of _buf: the partial sums of lines k - R + 1 .. k - 1
+        # (k = frames_seen), the lines still under the used rows; free rows follow them
+        self._buf = np.zeros((2 * self.ring_rows, self.n_columns), dtype=np.uint32)
+        self._origin = 0
         self.frames_seen = 0
 
     def lines_emitted(self, stage: int) -> int:
         """Lines of ``stage`` returned so far (the index of its next line)."""
         return complete_lines(self.frames_seen, stage)
 
-    def _add(self, frame: np.ndarray) -> None:
-        """Add row ``i`` of frame ``k`` to the partial sum of line ``k - i``, kept in ring slot
-        ``(i - k) mod R`` (:meth:`_slot`): the rows land on increasing slots, two contiguous runs."""
-        r_rows = self.ring_rows
-        r = (-self.frames_seen) % r_rows
-        # rows 0 .. R-r-1 -> slots r .. R-1; rows R-r .. R-1 -> slots 0 .. r-1
-        self._ring[r:] += frame[: r_rows - r]
-        if r:
-            self._ring[:r] += frame[r_rows - r : r_rows]
+    def _sum_dtype(self, dtype: np.dtype) -> np.dtype:
+        """A dtype that sums ``R`` rows of ``dtype`` exactly (and holds the partial sums so far):
+        uint32 for words of up to 16 bits, int64 for other integers, else float64."""
+        want: np.dtype
+        if dtype.kind in "bu" and dtype.itemsize <= 2 and self.ring_rows <= 1 << 16:
+            want = np.dtype(np.uint32)
+        elif dtype.kind in "biu":
+            want = np.dtype(np.int64)
+        else:
+            want = np.dtype(np.float64)
+        return np.promote_types(want, self._buf.dtype)
 
-    def _slot(self, line: int | np.ndarray) -> int | np.ndarray:
-        """Ring slot of the partial sum of scene line ``line``."""
-        return (-line) % self.ring_rows
+    def _window(self, n_frames: int, dtype: np.dtype) -> np.ndarray:
+        """Rows for the partial lines plus ``n_frames`` new lines (zeroed), in ``dtype``: the
+        buffer's row ``r`` is line ``frames_seen - R + 1 + r``."""
+        keep = self.ring_rows - 1
+        need = keep + n_frames
+        o = self._origin
+        if dtype != self._buf.dtype or need > len(self._buf):
+            buf = np.empty((max(len(self._buf), keep + 2 * n_frames), self.n_columns), dtype=dtype)
+            buf[:keep] = self._buf[o : o + keep]  # exact: into a wider or the same dtype
+            self._buf, self._origin, o = buf, 0, 0
+        elif o + need > len(self._buf):  # move the partial lines back to the front
+            self._buf[:keep] = self._buf[o : o + keep]
+            self._origin, o = 0, 0
+        win = self._buf[o : o + need]
+        win[keep:] = 0
+        return win
 
     def push(self, frame_dn: np.ndarray) -> dict[int, np.ndarray]:
         """Add one (M, N) frame of raw pixel values [DN].
@@ -281,27 +304,18 @@ class DTDIAccumulator:
             raise BenchSimError(
                 f"frame shape {f.shape}: expected (rows >= {self.ring_rows}, {self.n_columns})"
             )
-        self._add(f)
-        k = self.frames_seen
-        out: dict[int, np.ndarray] = {}
-        for m in self.stages:
-            j = k - m + 1
-            if j >= 0:
-                slot = self._slot(j)
-                out[m] = _finish(
-                    self._ring[slot], m, self.beta_bits, self.black_offset_dn, self.subtract_black,
-                    self.pedestal_dn[m],
-                )
-        # the line that just left the last used row (partial lines j < 0 included): free its slot
-        self._ring[self._slot(k - self.ring_rows + 1)] = 0.0
-        self.frames_seen = k + 1
-        return out
+        return {m: block[0] for m, block in self.push_many(f[None]).items() if len(block)}
 
     def push_many(self, frames_dn: np.ndarray) -> dict[int, np.ndarray]:
         """Add a (C, M, N) chunk of frames; return stage -> (lines completed, N) ``uint32``.
 
         Stage ``m``'s block holds its lines ``lines_emitted(m) - n .. lines_emitted(m) - 1``
         (in order); a stage that completed no line gets a (0, N) array.
+
+        Row ``i`` of the chunk's frame ``t`` (frame ``k = k0 + t``) is added to line ``k - i``
+        for all frames at once, row after row, so every line gets its rows in the order
+        ``i = 0, 1, ...`` as frame by frame; stage ``m`` of a line is its sum once row
+        ``m - 1`` is in.
         """
         chunk = np.asarray(frames_dn)
         if chunk.ndim == 2:
@@ -313,29 +327,27 @@ class DTDIAccumulator:
             raise BenchSimError(
                 f"frame shape {chunk.shape[1:]}: expected (rows >= {self.ring_rows}, {self.n_columns})"
             )
-        st = np.asarray(self.stages)
-        k0 = self.frames_seen
-        # raw sums of the line each stage completes in each frame, finished per stage at the end
-        sums = np.empty((st.size, n_frames, self.n_columns), dtype=np.float64)
-        r_rows = self.ring_rows
-        for t in range(n_frames):
-            self._add(chunk[t])
-            k = k0 + t
-            j = k - st + 1
-            if j[0] >= 0:  # stages ascend: every stage completed a line
-                sums[:, t] = self._ring[self._slot(j)]
-            else:
-                ok = j >= 0
-                sums[ok, t] = self._ring[self._slot(j[ok])]
-            self._ring[self._slot(k - r_rows + 1)] = 0.0
-            self.frames_seen = k + 1
-        out = {}
-        for s_i, m in enumerate(self.stages):
-            first = max(m - 1 - k0, 0)  # frames of the chunk before stage m's first line
-            out[m] = _finish(
-                sums[s_i, first:], m, self.beta_bits, self.black_offset_dn, self.subtract_black,
-                self.pedestal_dn[m],
-            ) if first < n_frames else np.zeros((0, self.n_columns), dtype=np.uint32)
+        r_rows, k0 = self.ring_rows, self.frames_seen
+        out = {m: np.zeros((0, self.n_columns), dtype=np.uint32) for m in self.stages}
+        if n_frames == 0:
+            return out
+        win = self._window(n_frames, self._sum_dtype(chunk.dtype))
+        last = r_rows - 1  # window row of line k0 (row 0 of frame 0)
+        if n_frames == 1:  # one frame: every line gets one row, in one reversed add
+            win[::-1] += chunk[0, :r_rows]
+        for i in range(r_rows):
+            if n_frames > 1:
+                win[last - i : last - i + n_frames] += chunk[:, i]
+            m = i + 1
+            if m in self.pedestal_dn:  # a stage: lines k0 + t - i (t >= i - k0: line >= 0)
+                first = max(i - k0, 0)
+                if first < n_frames:
+                    out[m] = _finish(
+                        win[last - i + first : last - i + n_frames], m, self.beta_bits,
+                        self.black_offset_dn, self.subtract_black, self.pedestal_dn[m],
+                    )
+        self._origin += n_frames
+        self.frames_seen = k0 + n_frames
         return out
 
 

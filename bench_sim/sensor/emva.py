@@ -45,16 +45,29 @@ import numpy as np
 
 from bench_sim.config import SensorConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.sensor.kernels import TILE_ELEMENTS, Scratch, electrons_to_dn, joint_quantile_into
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2, pixel_mean_var_dn, pixel_saturation_dn
+from bench_sim.sensor.sampler import (
+    COMBINED_READ_NOISE_MIN_E,
+    FULL_WELL_SIGMAS,
+    SHOT_NOISE_SWITCH_E,
+    SKEWNESS_MAX,
+    box_muller_normals,
+    shot_and_read_electrons,
+    shot_electrons,
+)
 
 __all__ = [
     "FixedPattern",
+    "ExposurePlan",
     "draw_fixed_pattern",
     "expose",
     "shot_electrons",
     "shot_and_read_electrons",
     "SHOT_NOISE_SWITCH_E",
     "COMBINED_READ_NOISE_MIN_E",
+    "FULL_WELL_SIGMAS",
+    "SKEWNESS_MAX",
     "pixel_mean_var_dn",
     "pixel_saturation_dn",
     "QUANTIZATION_VAR_DN2",
@@ -157,125 +170,16 @@ def draw_fixed_pattern(sensor: SensorConfig, rng: np.random.Generator) -> FixedP
     return FixedPattern(prnu_gain=gain, dark_current_e_s=dark, column_offset_dn=col)
 
 
-#: Mean electron count from which ``shot_noise_sampler = "hybrid"`` draws shot noise from the
-#: rounded Cornish-Fisher normal approximation instead of numpy's exact Poisson sampler.
-SHOT_NOISE_SWITCH_E = 30.0
-#: Largest skewness of shot + read noise drawn as one normal approximation (``"hybrid"``)
-SKEWNESS_MAX = 0.05
-#: Read noise [e- rms] from which ``"hybrid"`` draws shot and read noise together: the skewness
-#: ``mu / (mu + sigma^2)**1.5`` of Poisson(mu) + N(0, sigma^2) peaks at ``2 / (3 sqrt(3) sigma)``
-#: (at ``mu = 2 sigma^2``), at most :data:`SKEWNESS_MAX` from here on.
-COMBINED_READ_NOISE_MIN_E = 2.0 / (3.0 * np.sqrt(3.0) * SKEWNESS_MAX)
-#: Pixels whose mean electrons come within this many standard deviations of the full well get
-#: their shot noise drawn apart (its clip at the full well comes before the read noise).
-FULL_WELL_SIGMAS = 8.0
 #: Elements per block of :func:`expose`'s loop (whole frames; a block's arrays stay in cache).
 _BLOCK_ELEMENTS = 1 << 16
 
 
-def _cornish_fisher(
-    z: np.ndarray, mean: np.ndarray, var: np.ndarray, k3: np.ndarray, k4: np.ndarray
-) -> np.ndarray:
-    """Third-order Cornish-Fisher quantile of a distribution with the given mean, variance and
-    third and fourth cumulants at the standard normal quantile ``z``::
-
-        x = mean + s z + a (z^2 - 1) / 6 + b (z^3 - 3 z) / 24 - c (2 z^3 - 5 z) / 36
-
-    with ``s = sqrt(var)``, ``a = s gamma_1 = k3 / var``, ``b = s gamma_2 = k4 / (var s)``,
-    ``c = s gamma_1^2 = a^2 / s``; evaluated in Horner form in ``z``'s dtype."""
-    s = np.sqrt(var)
-    a = k3 / var
-    b = k4 / (var * s)
-    c = a * a / s
-    c3 = b / 24 - c / 18
-    x = z * c3
-    x += a / 6
-    x *= z
-    x += s - b / 8 + c * (5 / 36)
-    x *= z
-    x += mean - a / 6
-    return x
-
-
-def shot_electrons(mean_e: np.ndarray, rng: np.random.Generator, sampler: str = "hybrid") -> np.ndarray:
-    """Poisson-distributed electron counts of mean ``mean_e`` (an array of integers in
-    ``mean_e``'s float dtype).
-
-    ``sampler = "poisson"``: numpy's exact Poisson sampler. ``"hybrid"``: exact below
-    :data:`SHOT_NOISE_SWITCH_E` mean electrons; above, one standard normal ``z`` per pixel
-    through the third-order Cornish-Fisher expansion of the Poisson quantile (cumulants
-    ``kappa_2 = kappa_3 = kappa_4 = lam``), rounded to the nearest count -- the continuity
-    correction of a lattice distribution -- with Sheppard's correction: the expansion is taken
-    at variance ``lam - 1/12`` so that the rounded counts have variance ``lam``::
-
-        n = rint(CF(z; mean lam, variance lam - 1/12, kappa_3 = kappa_4 = lam))
-
-    This is the normal approximation of sensor simulators (exact Poisson for small means, a
-    continuity-corrected normal above) with the skewness ``1/sqrt(lam)`` and kurtosis terms
-    added, which a plain rounded normal lacks (a large sample detects that even at thousands of
-    electrons). The draws of one call: all normals first, then the exact Poisson counts of the
-    pixels below the switch-over.
-
-    References
-    ----------
-    E. A. Cornish, R. A. Fisher, "Moments and cumulants in the specification of distributions",
-    Revue de l'Institut International de Statistique 5 (1937) 307-320.
-    W. F. Sheppard, "On the calculation of the most probable values of frequency-constants, for
-    data arranged according to equidistant divisions of a scale", Proc. London Math. Soc. 29
-    (1898) 353-380.
-    """
-    lam = np.asarray(mean_e)
-    dtype = lam.dtype if lam.dtype in (np.float32, np.float64) else np.dtype(np.float64)
-    lam = lam.astype(dtype, copy=False)
-    if sampler == "poisson":
-        return rng.poisson(lam).astype(dtype)
-    if sampler != "hybrid":
-        raise BenchSimError(f"sensor.shot_noise_sampler = {sampler!r}: allowed 'hybrid' or 'poisson'")
-    z = rng.standard_normal(lam.shape, dtype=dtype)
-    big = np.maximum(lam, dtype.type(SHOT_NOISE_SWITCH_E))  # the normal branch serves big means only
-    n = _cornish_fisher(z, big, big - dtype.type(1 / 12), big, big)
-    np.rint(n, out=n)
-    np.maximum(n, 0, out=n)
-    low = lam < SHOT_NOISE_SWITCH_E
-    if low.any():
-        n[low] = rng.poisson(lam[low])
-    return n
-
-
-def shot_and_read_electrons(
-    mean_e: np.ndarray, deterministic_e: np.ndarray | float, read_noise_e: float, rng: np.random.Generator
-) -> np.ndarray:
-    """Electrons after shot and read noise, drawn together: ``d + Poisson(mu) + N(0, sigma^2)``
-    from one standard normal per pixel through its third-order Cornish-Fisher expansion
-    (cumulants ``kappa_2 = mu + sigma^2``, ``kappa_3 = kappa_4 = mu``).
-
-    For ``sigma >=`` :data:`COMBINED_READ_NOISE_MIN_E` the sum's skewness is at most
-    :data:`SKEWNESS_MAX` at every ``mu``, so the expansion's error terms (order ``gamma^3``) are
-    of order 1e-4, and the electron lattice is invisible under the read noise (its ripple on the
-    sum's density is ``~2 exp(-2 pi^2 sigma^2)``). The full-well clip between shot and read noise
-    is not applied: callers use this only where the full well is more than
-    :data:`FULL_WELL_SIGMAS` standard deviations away.
-
-    Parameters
-    ----------
-    mean_e
-        ``mu``: mean electrons of the Poisson part (float32 or float64 array).
-    deterministic_e
-        ``d``: electrons without noise (a light or dark signal whose noise is switched off).
-    read_noise_e
-        ``sigma`` [e- rms].
-    """
-    lam = np.asarray(mean_e)
-    z = rng.standard_normal(lam.shape, dtype=lam.dtype)
-    var = lam + lam.dtype.type(read_noise_e * read_noise_e)
-    return _cornish_fisher(z, lam + deterministic_e, var, lam, lam)
-
-
 @dataclass(frozen=True)
-class _ExposurePlan:
-    """What :func:`expose` computes once per call: the switches and per-pixel constants, in the
-    working precision ``work`` (float32 with quantisation: errors ~1e-4 DN, far below the
-    rounding, and twice as fast; float64 without)."""
+class ExposurePlan:
+    """What :func:`expose` computes once per sensor, fixed pattern and integration time: the
+    switches and per-pixel constants, in the working precision ``work`` (float32 with
+    quantisation: errors ~1e-4 DN, far below the rounding, and twice as fast; float64 without).
+    Make it with :meth:`of` and pass it to every :func:`expose` call of a pass."""
 
     work: np.dtype
     shot_noise: bool
@@ -292,22 +196,28 @@ class _ExposurePlan:
     noisy: bool  # shot or dark noise on
     together: bool  # shot and read noise drawn together (shot_and_read_electrons)
     near_fw_e: float  # mean electrons from which the full well is within FULL_WELL_SIGMAS
+    lam_per_photon_max: float  # largest qe_gain [e-/photon]
+    dark_e_max: float  # largest dark_e [e-]
 
     @classmethod
-    def of(cls, sensor: SensorConfig, fixed: FixedPattern, t_int_s: float) -> _ExposurePlan:
+    def of(cls, sensor: SensorConfig, fixed: FixedPattern, t_int_s: float) -> ExposurePlan:
+        """The plan of ``sensor`` with the fixed pattern ``fixed`` (the frames' ``M x N``) and
+        frames of ``t_int_s`` seconds."""
         work = np.dtype(np.float32 if sensor.quantization else np.float64)
         sampler = getattr(sensor, "shot_noise_sampler", "hybrid")
         read_e = float(sensor.read_noise_e) if sensor.read_noise else 0.0
         noisy = sensor.shot_noise or sensor.dark_noise
         k = FULL_WELL_SIGMAS  # m + k sqrt(m) = FW
+        qe_gain = _readonly((sensor.quantum_efficiency * fixed.prnu_gain).astype(work))
+        dark_e = _readonly((fixed.dark_current_e_s * float(t_int_s)).astype(work))
         return cls(
             work=work,
             shot_noise=sensor.shot_noise,
             dark_noise=sensor.dark_noise,
             quantization=sensor.quantization,
-            qe_gain=(sensor.quantum_efficiency * fixed.prnu_gain).astype(work),
-            dark_e=(fixed.dark_current_e_s * float(t_int_s)).astype(work),
-            offset_dn=(sensor.black_offset_dn + fixed.column_offset_dn).astype(work),
+            qe_gain=qe_gain,
+            dark_e=dark_e,
+            offset_dn=_readonly((sensor.black_offset_dn + fixed.column_offset_dn).astype(work)),
             gain=work.type(sensor.conversion_gain_dn_per_e),
             full_well=work.type(sensor.full_well_e),
             top=float(pixel_saturation_dn(sensor)),
@@ -316,11 +226,24 @@ class _ExposurePlan:
             noisy=noisy,
             together=sampler == "hybrid" and noisy and read_e >= COMBINED_READ_NOISE_MIN_E,
             near_fw_e=((-k + np.sqrt(k * k + 4.0 * sensor.full_well_e)) / 2.0) ** 2,
+            lam_per_photon_max=float(qe_gain.max()) if qe_gain.size else 0.0,
+            dark_e_max=float(dark_e.max()) if dark_e.size else 0.0,
         )
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, columns) of the frames the plan serves."""
+        return (int(self.qe_gain.shape[0]), int(self.qe_gain.shape[1]))
+
+    @property
+    def in_cache(self) -> bool:
+        """Whether :func:`expose` takes the in-cache loop of the common case: quantised output,
+        shot, dark and read noise drawn together (Poisson mean ``light + dark``, nothing apart)."""
+        return self.together and self.shot_noise and self.dark_noise and self.quantization
 
 
 def _apart(
-    plan: _ExposurePlan,
+    plan: ExposurePlan,
     poisson_e: np.ndarray,
     fixed_e: np.ndarray,
     s_out: np.ndarray | None,
@@ -339,8 +262,30 @@ def _apart(
     return electrons
 
 
+def _near_full_well(
+    plan: ExposurePlan,
+    poisson_e: np.ndarray,
+    fixed_e: np.ndarray,
+    electrons: np.ndarray,
+    s_blk: np.ndarray | None,
+    rng: np.random.Generator,
+) -> None:
+    """Redraw, apart (:func:`_apart`), the electrons of the pixels within
+    :data:`FULL_WELL_SIGMAS` of the full well, after the block's joint draws; ``s_blk`` (if
+    given) is set where their full well was reached (and cleared elsewhere)."""
+    if s_blk is not None:
+        s_blk[...] = False
+    near = (poisson_e + fixed_e) >= plan.near_fw_e
+    if near.any():
+        s_near = np.empty(int(near.sum()), dtype=bool)
+        fixed_near = np.broadcast_to(fixed_e, near.shape)[near]
+        electrons[near] = _apart(plan, poisson_e[near], fixed_near, s_near, rng)
+        if s_blk is not None:
+            s_blk[near] = s_near
+
+
 def _block_electrons(
-    plan: _ExposurePlan, ph: np.ndarray, rng: np.random.Generator, s_blk: np.ndarray | None
+    plan: ExposurePlan, ph: np.ndarray, rng: np.random.Generator, s_blk: np.ndarray | None
 ) -> np.ndarray:
     """Electrons [e-] of a block of frames of mean photons ``ph``, with their temporal noise;
     ``s_blk`` (if given) is set where the full well was reached."""
@@ -359,16 +304,78 @@ def _block_electrons(
     if not plan.together:
         return _apart(plan, poisson_e, fixed_e, s_blk, rng)
     electrons = shot_and_read_electrons(poisson_e, fixed_e, plan.read_e, rng)
-    if s_blk is not None:
-        s_blk[...] = False
-    near = (poisson_e + fixed_e) >= plan.near_fw_e
-    if near.any():
-        s_near = np.empty(int(near.sum()), dtype=bool)
-        fixed_near = np.broadcast_to(fixed_e, near.shape)[near]
-        electrons[near] = _apart(plan, poisson_e[near], fixed_near, s_near, rng)
-        if s_blk is not None:
-            s_blk[near] = s_near
+    _near_full_well(plan, poisson_e, fixed_e, electrons, s_blk, rng)
     return electrons
+
+
+def _expose_in_cache(
+    plan: ExposurePlan, frames: np.ndarray, rng: np.random.Generator, out: np.ndarray,
+    sat: np.ndarray | None, step: int,
+) -> None:
+    """:func:`expose`'s loop for :attr:`ExposurePlan.in_cache`, bit-identical to the general
+    one (:func:`_block_electrons` with :func:`shot_and_read_electrons`): per block of ``step``
+    frames the same draws (its normals, then the pixels near the full well apart), with the
+    arithmetic done in place on slabs of frame lines that stay in the cache
+    (:mod:`bench_sim.sensor.kernels`)."""
+    rows, cols = plan.shape
+    lines = min(step, frames.shape[0]) * rows
+    lam_buf = np.empty((lines, cols), plan.work)  # mean electrons, the Poisson mean [e-]
+    z_buf = np.empty((lines, cols), plan.work)
+    tile = max(1, TILE_ELEMENTS // cols)
+    w = Scratch.of((min(tile, lines), cols), plan.work)
+    read_var = plan.work.type(plan.read_e * plan.read_e)
+    for f0 in range(0, frames.shape[0], step):
+        ph = frames[f0 : f0 + step]
+        # whether a read may come near the full well: the mean electrons, rounded three times
+        # in float32 (photons, product, sum), are at most this bound times (1 + 2**-24)**3
+        bound = _photons_max(ph) * plan.lam_per_photon_max + plan.dark_e_max
+        maybe_near = bound * (1.0 + 1e-6) >= plan.near_fw_e
+        n = ph.shape[0] * rows
+        lam, z = lam_buf[:n], z_buf[:n]
+        lam_f = lam.reshape(ph.shape)  # a view: (frames, rows, columns)
+        np.multiply(ph, plan.qe_gain, out=lam_f, dtype=plan.work)
+        lam_f += plan.dark_e
+        box_muller_normals(rng, z)  # as shot_and_read_electrons draws them
+        dn_blk = out[f0 : f0 + step].reshape(n, cols)
+        s_blk = None if sat is None else sat[f0 : f0 + step].reshape(n, cols)
+        near = maybe_near and bool(lam.max() >= plan.near_fw_e)
+        e_blk = np.empty((n, cols), plan.work) if near else None
+        for l0 in range(0, n, tile):
+            ws = w.head(min(tile, n - l0))
+            sl = slice(l0, l0 + len(ws.x))
+            np.add(lam[sl], read_var, out=ws.v)
+            x = joint_quantile_into(z[sl], lam[sl], ws.v, lam[sl], ws)
+            if e_blk is not None:
+                e_blk[sl] = x
+                continue
+            s_sl = None
+            if s_blk is not None:
+                s_sl = s_blk[sl]
+                s_sl[...] = False
+            electrons_to_dn(x, plan.gain, plan.offset_dn, plan.top, True, dn_blk[sl], s_sl, ws.flag)
+        if e_blk is not None:
+            _near_full_well(plan, lam, np.zeros((), plan.work), e_blk, s_blk, rng)
+            electrons_to_dn(e_blk, plan.gain, plan.offset_dn, plan.top, True, dn_blk, s_blk)
+
+
+def _photons_max(ph: np.ndarray) -> float:
+    """The largest mean photons of a block of frames; raises unless all are finite and >= 0."""
+    top = float(ph.max())
+    if not (ph.min() >= 0.0 and np.isfinite(top)):  # min >= 0 is False for NaN
+        raise BenchSimError("photons: must be finite and >= 0 (mean photons per pixel per frame)")
+    return top
+
+
+def _check_photons(p: np.ndarray, fixed: FixedPattern, t_int_s: float) -> None:
+    """Check the shapes and the integration time of :func:`expose` (the photons' values are
+    checked block by block, :func:`_photons_max`)."""
+    if p.ndim < 2 or p.shape[-2:] != fixed.shape:
+        raise BenchSimError(
+            f"photons shape {p.shape}: the last two axes must be the sensor's (rows, columns) = "
+            f"{fixed.shape}"
+        )
+    if t_int_s < 0 or not np.isfinite(t_int_s):
+        raise BenchSimError(f"t_int_s = {t_int_s!r}: must be a finite time >= 0 s")
 
 
 def expose(
@@ -379,6 +386,7 @@ def expose(
     rng: np.random.Generator,
     *,
     saturated: np.ndarray | None = None,
+    plan: ExposurePlan | None = None,
 ) -> np.ndarray:
     """Expose the sensor: mean photons per pixel per frame -> raw pixel values [DN].
 
@@ -389,7 +397,8 @@ def expose(
 
     Random draws per block: with ``sensor.shot_noise_sampler = "hybrid"``, read noise of at
     least :data:`COMBINED_READ_NOISE_MIN_E` and shot or dark noise on, shot and read noise come
-    together from :func:`shot_and_read_electrons` (one normal per pixel); then the pixels within
+    together from :func:`shot_and_read_electrons` (one normal per pixel, by Box-Muller in
+    float32: :func:`bench_sim.sensor.sampler.box_muller_normals`); then the pixels within
     :data:`FULL_WELL_SIGMAS` of the full well draw theirs apart. Otherwise: the shot noise
     (:func:`shot_electrons`), the full-well clip, then the read noise (a normal per pixel).
 
@@ -411,6 +420,9 @@ def expose(
         Optional boolean array of ``photons``' shape, filled with ``True`` where the pixel hit
         its full well or the ADC's top value ``2**adc_bits - 1`` (where the linear model's mean
         no longer holds).
+    plan
+        ``ExposurePlan.of(sensor, fixed, t_int_s)`` of these same arguments, made once for
+        many calls (default: made here).
 
     Returns
     -------
@@ -420,31 +432,23 @@ def expose(
         ``float64`` in the same range (not rounded) with it off.
     """
     p = np.asarray(photons)
-    if p.ndim < 2 or p.shape[-2:] != fixed.shape:
-        raise BenchSimError(
-            f"photons shape {p.shape}: the last two axes must be the sensor's (rows, columns) = "
-            f"{fixed.shape}"
-        )
-    if t_int_s < 0 or not np.isfinite(t_int_s):
-        raise BenchSimError(f"t_int_s = {t_int_s!r}: must be a finite time >= 0 s")
-    if p.size and not (np.isfinite(p).all() and p.min() >= 0.0):
-        raise BenchSimError("photons: must be finite and >= 0 (mean photons per pixel per frame)")
-
+    _check_photons(p, fixed, t_int_s)
+    if plan is None:
+        plan = ExposurePlan.of(sensor, fixed, t_int_s)
+    elif plan.shape != fixed.shape:
+        raise BenchSimError(f"plan for {plan.shape} pixels, the frames have {fixed.shape}")
     rows, cols = fixed.shape
     frames = p.reshape(-1, rows, cols)
     out = np.empty(frames.shape, dtype=np.uint16 if sensor.quantization else np.float64)
     sat = None if saturated is None else saturated.reshape(frames.shape)
-    plan = _ExposurePlan.of(sensor, fixed, t_int_s)
     step = max(1, _BLOCK_ELEMENTS // (rows * cols))
+    if plan.in_cache:
+        _expose_in_cache(plan, frames, rng, out, sat, step)
+        return out.reshape(p.shape)
     for f0 in range(0, frames.shape[0], step):
         s_blk = None if sat is None else sat[f0 : f0 + step]
+        _photons_max(frames[f0 : f0 + step])
         dn = _block_electrons(plan, frames[f0 : f0 + step], rng, s_blk)
-        dn *= plan.gain
-        dn += plan.offset_dn
-        if s_blk is not None:
-            s_blk |= dn >= plan.top - (0.5 if plan.quantization else 0.0)
-        if plan.quantization:
-            np.rint(dn, out=dn)
-        np.clip(dn, 0, plan.top, out=dn)
-        out[f0 : f0 + step] = dn
+        electrons_to_dn(dn, plan.gain, plan.offset_dn, plan.top, plan.quantization,
+                        out[f0 : f0 + step], s_blk)
     return out.reshape(p.shape)

@@ -27,7 +27,7 @@ from bench_sim.config import DTDIConfig, SensorConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.runtime.parallel import chunk_generator, ordered_imap, seed_sequence
 from bench_sim.sensor.dtdi import DTDIAccumulator, collect_stage_lines, validate_stages
-from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern, expose
+from bench_sim.sensor.emva import ExposurePlan, FixedPattern, draw_fixed_pattern, expose
 
 __all__ = [
     "sensor_dtdi_pass",
@@ -102,11 +102,13 @@ def iter_exposed(
     them in order, a few chunks exposed ahead of the consumer. ``saturated``: also return the
     saturated reads (see :func:`bench_sim.sensor.emva.expose`)."""
 
+    plan = ExposurePlan.of(sensor, fixed, t_int_s)  # once for every chunk
+
     def one(item: tuple[int, np.ndarray]) -> Exposed:
         c, ph = item
         t0 = time.perf_counter()
         sat = np.empty(ph.shape, dtype=bool) if saturated else None
-        raw = expose(ph, sensor, fixed, t_int_s, chunk_generator(noise, c), saturated=sat)
+        raw = expose(ph, sensor, fixed, t_int_s, chunk_generator(noise, c), saturated=sat, plan=plan)
         return Exposed(ph, raw, sat, time.perf_counter() - t0)
 
     return ordered_imap(one, enumerate(chunks))
