@@ -17,6 +17,10 @@ dimensions ``stage``, ``line``, ``column``) holds the variables of :data:`PASS_V
 ``clipped``     a read hit full well or the ADC top, or the word hit ``2**beta - 1``
 ``gamma_hdr``   eq. 11 fusion of stages ``fusion.mu1``, ``fusion.mu2`` (when both requested)
 ``gamma_hdr_source``  the stage each ``gamma_hdr`` pixel came from
+``gamma_hdr_error``   with the truth: ``(gamma_hdr - E) / E``, ``E`` = ``linear_dn`` of ``mu2``
+                less the pedestal (its exact expectation where nothing clips; nan below 1 DN)
+``tdi_light_ratio``   with the truth: ``r = (photons_mu2 / mu2) / (photons_mu1 / mu1)``, the TDI
+                window's light ratio (eq. 11 assumes ``r = 1``; :mod:`bench_sim.metrics.fusion_truth`)
 =============== ======================================================================
 
 Attributes carry the resolved config as TOML text, its SHA-256, the seed, the version, the
@@ -45,11 +49,13 @@ import numpy as np
 from bench_sim.config import BETA_BITS_MAX, BenchConfig, config_sha256, config_to_toml_text
 from bench_sim.errors import BenchSimError
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+from bench_sim.metrics.fusion_truth import relative_error, tdi_light_ratio
 from bench_sim.render.exposures import RenderSetup, iter_photon_frames, prepare
 from bench_sim.runtime.parallel import prefetch, seed_sequence
-from bench_sim.sensor.dtdi import frames_needed
+from bench_sim.sensor.dtdi import frames_needed, full_scale_dn
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern
 from bench_sim.sensor.model import word_dtype
+from bench_sim.sensor.pass_lines import ArraySink, LineAssembler, PassSink
 from bench_sim.sensor.pass_truth import PassTruth
 from bench_sim.sensor.stream import DEFAULT_CHUNK_FRAMES, iter_stream
 from bench_sim.version import __version__
@@ -72,14 +78,19 @@ __all__ = [
     "SENSOR_CHUNK_FRAMES",
     "RENDER_CHUNK_FRAMES",
     "TRUTH_BAND_LINES",
+    "pass_dtypes",
+    "pass_coords",
+    "pass_attrs",
+    "COORD_ATTRS",
 ]
 
 #: Frames exposed per vectorised sensor call (the temporal noise depends on it: fixed).
 SENSOR_CHUNK_FRAMES = DEFAULT_CHUNK_FRAMES
 #: Frames rendered per engine call (a multiple of the sensor chunk).
 RENDER_CHUNK_FRAMES = 64
-#: Output lines per band of the reflectance truth.
-TRUTH_BAND_LINES = 256
+#: Output lines per band of the reflectance truth (the lines a streamed pass holds besides the
+#: ``max(stages)`` in progress; the values do not depend on it).
+TRUTH_BAND_LINES = 64
 
 # --- the pass's variables ------------------------------------------------------------------------
 
@@ -109,6 +120,9 @@ class Variable:
         Long name (the dataset's ``long_name`` attribute).
     truth
         Computed only with the truth (``run_pass(..., truth=True)``).
+    map
+        A map of ``simulate`` derived from the truth and the fused image (not a data set's
+        variable: :func:`pass_variables` lists it only when asked).
     """
 
     name: str
@@ -117,6 +131,7 @@ class Variable:
     units: str
     doc: str
     truth: bool = False
+    map: bool = False
 
     def array_dtype(self, beta_bits: int) -> np.dtype:
         """The dtype of the array in a pass of ``beta_bits``-bit words."""
@@ -144,15 +159,25 @@ PASS_VARIABLES: tuple[Variable, ...] = (
     Variable("gamma_hdr", IMAGE_DIMS, "float32", "DN",
              "Gamma_HDR, paper eq. 11, in stage-mu2 units, pedestal removed"),
     Variable("gamma_hdr_source", IMAGE_DIMS, "int16", "1", "stage each Gamma_HDR pixel came from"),
+    Variable("gamma_hdr_error", IMAGE_DIMS, "float32", "1",
+             "relative error of Gamma_HDR against its exact expectation (linear_dn of stage mu2 less "
+             "the pedestal; nan below 1 DN)", truth=True, map=True),
+    Variable("tdi_light_ratio", IMAGE_DIMS, "float32", "1",
+             "TDI-window light ratio r = (photons_mu2 / mu2) / (photons_mu1 / mu1); eq. 11 assumes 1",
+             truth=True, map=True),
 )
 #: name -> its :class:`Variable` of :data:`PASS_VARIABLES`
 VARIABLES_BY_NAME: dict[str, Variable] = {v.name: v for v in PASS_VARIABLES}
 
 
-def pass_variables(dims: tuple[str, ...] | None = None, *, truth: bool = True) -> tuple[Variable, ...]:
+def pass_variables(
+    dims: tuple[str, ...] | None = None, *, truth: bool = True, maps: bool = False
+) -> tuple[Variable, ...]:
     """The variables of :data:`PASS_VARIABLES` with dimensions ``dims`` (default: all), without
-    the truth when ``truth`` is false."""
-    return tuple(v for v in PASS_VARIABLES if (dims is None or v.dims == dims) and (truth or not v.truth))
+    the truth when ``truth`` is false, with ``simulate``'s maps (``gamma_hdr_error``,
+    ``tdi_light_ratio``) only when ``maps``."""
+    return tuple(v for v in PASS_VARIABLES if (dims is None or v.dims == dims) and (truth or not v.truth)
+                 and (maps or not v.map))
 
 
 def stage_pixel_bytes(beta_bits: int | None, *, truth: bool) -> int:
@@ -262,14 +287,15 @@ def _stream(
     setup: RenderSetup,
     fp: FixedPattern,
     noise: np.random.SeedSequence,
-    dn: dict[int, np.ndarray],
+    st: tuple[int, ...],
+    lines_out: LineAssembler,
     truth: PassTruth | None,
     timings: dict[str, float],
     on_frames: Callable[[int], None] | None,
 ) -> None:
-    """The streaming pass: rendered frames through the sensor and DTDI into ``dn`` (stage ->
-    (lines, N) words), and into ``truth``."""
-    st, lines = tuple(dn), cfg.lines
+    """The streaming pass: rendered frames through the sensor and DTDI, the words of every
+    completed line and, with ``truth``, their truth into ``lines_out``."""
+    lines = cfg.lines
     done = dict.fromkeys(st, 0)
     t_pass = time.perf_counter()
     chunks = iter_stream(
@@ -280,12 +306,13 @@ def _stream(
         t0 = time.perf_counter()
         for m, block in got.lines.items():
             take = block[: max(lines - done[m], 0)]
-            dn[m][done[m] : done[m] + len(take)] = take
+            lines_out.put("dn", m, done[m], take)
             done[m] += len(take)
         t1 = time.perf_counter()
         timings["sensor_dtdi"] += got.seconds + t1 - t0
         if truth is not None:
-            truth.push(got.exposed)
+            for tb in truth.push(got.exposed):
+                lines_out.put(tb.name, tb.stage, tb.line0, tb.values)
             timings["truth"] += time.perf_counter() - t1
         if on_frames is not None:
             on_frames(got.exposed.photons.shape[0])
@@ -294,20 +321,40 @@ def _stream(
         raise BenchSimError(f"simulate: the pass gave only {min(done.values())} of {lines} lines")
 
 
-def _fused(cfg: BenchConfig, dn: dict[int, np.ndarray]) -> dict[str, np.ndarray]:
-    """``gamma_hdr`` and ``gamma_hdr_source`` (eq. 11 of stages ``fusion.mu1``, ``fusion.mu2``), when both
-    stages are in the pass."""
+def _fused(cfg: BenchConfig, lines: dict[int, dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """``gamma_hdr`` and ``gamma_hdr_source`` (eq. 11 of stages ``fusion.mu1``, ``fusion.mu2``) of
+    the same lines of both stages (variable -> lines), and with their truth ``gamma_hdr_error``
+    (:func:`bench_sim.metrics.fusion_truth.relative_error` against ``linear_dn`` of ``mu2`` less
+    the pedestal the fusion removed) and ``tdi_light_ratio``
+    (:func:`bench_sim.metrics.fusion_truth.tdi_light_ratio` of their ``photons``)."""
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    if not (mu1 in dn and mu2 in dn):
-        return {}
     ped = _pedestal_dn(cfg)
     kw = {"pedestal_dn": ped} if ped else {}
-    fused = fuse_dtdi_hdr_eq11(dn[mu1], dn[mu2], mu1=mu1, mu2=mu2, beta=cfg.dtdi.beta_bits, **kw)
-    dtypes = {v.name: v.array_dtype(cfg.dtdi.beta_bits) for v in pass_variables(IMAGE_DIMS)}
-    return {
+    beta = cfg.dtdi.beta_bits
+    fused = fuse_dtdi_hdr_eq11(lines[mu1]["dn"], lines[mu2]["dn"], mu1=mu1, mu2=mu2, beta=beta, **kw)
+    dtypes = {v.name: v.array_dtype(beta) for v in pass_variables(IMAGE_DIMS, maps=True)}
+    out = {
         "gamma_hdr": fused.hdr.astype(dtypes["gamma_hdr"]),
         "gamma_hdr_source": fused.source.astype(dtypes["gamma_hdr_source"]),
     }
+    if "linear_dn" in lines[mu2]:
+        err = relative_error(fused.hdr, lines[mu2]["linear_dn"] - ped)
+        ratio = tdi_light_ratio(lines[mu1]["photons"], lines[mu2]["photons"], mu1, mu2)
+        out["gamma_hdr_error"] = err.astype(dtypes["gamma_hdr_error"])
+        out["tdi_light_ratio"] = ratio.astype(dtypes["tdi_light_ratio"])
+    return out
+
+
+def pass_dtypes(
+    cfg: BenchConfig, st: tuple[int, ...], *, truth: bool
+) -> tuple[dict[str, np.dtype], dict[str, np.dtype]]:
+    """The dtypes of a pass's stage variables and of its image variables (``gamma_hdr`` and
+    ``gamma_hdr_source`` when both fusion stages are in ``st``), from :data:`PASS_VARIABLES`."""
+    beta = cfg.dtdi.beta_bits
+    stage = {v.name: v.array_dtype(beta) for v in pass_variables(STAGE_DIMS, truth=truth)}
+    fused = cfg.fusion.mu1 in st and cfg.fusion.mu2 in st
+    image = {v.name: v.array_dtype(beta) for v in pass_variables(IMAGE_DIMS, truth=truth, maps=True)}
+    return stage, (image if fused else {})
 
 
 def _make_dataset(
@@ -315,24 +362,43 @@ def _make_dataset(
     seed: int | np.random.SeedSequence | np.random.Generator,
     setup: RenderSetup,
     st: tuple[int, ...],
-    dn_all: np.ndarray,
-    truth: PassTruth | None,
+    arrays: dict[str, np.ndarray],
 ) -> xr.Dataset:
-    """The pass's :class:`xarray.Dataset` (see the module docstring)."""
+    """The pass's :class:`xarray.Dataset` (see the module docstring) of its arrays."""
     import xarray as xr
 
-    lines, n_cols = cfg.lines, cfg.sensor.columns
-    arrays: dict[str, np.ndarray] = {"dn": dn_all, **(truth.arrays if truth is not None else {})}
-    arrays.update(_fused(cfg, {m: dn_all[s] for s, m in enumerate(st)}))
-    coords = {"stage": np.asarray(st, dtype=np.int64), "line": np.arange(lines), "column": np.arange(n_cols)}
     data: dict[str, Any] = {v.name: (v.dims, arrays[v.name]) for v in PASS_VARIABLES if v.name in arrays}
-    ds = xr.Dataset(data, coords=coords)
+    ds = xr.Dataset(data, coords=pass_coords(cfg, st))
     for name, var in ds.data_vars.items():
         var.attrs.update(units=VARIABLES_BY_NAME[str(name)].units, long_name=VARIABLES_BY_NAME[str(name)].doc)
-    ds["line"].attrs.update(units="1", long_name="scene line (material at line * delta along the track)")
-    ds["column"].attrs.update(units="1", long_name="sensor column")
-    ds["stage"].attrs.update(units="1", long_name="DTDI stage m (rows summed)")
-    ds.attrs.update(
+    for name, attrs in COORD_ATTRS.items():
+        ds[name].attrs.update(attrs)
+    ds.attrs.update(pass_attrs(cfg, seed, setup, fused="gamma_hdr" in arrays))
+    return ds
+
+
+#: units and long names of the pass's coordinates
+COORD_ATTRS = {
+    "line": {"units": "1", "long_name": "scene line (material at line * delta along the track)"},
+    "column": {"units": "1", "long_name": "sensor column"},
+    "stage": {"units": "1", "long_name": "DTDI stage m (rows summed)"},
+}
+
+
+def pass_coords(cfg: BenchConfig, st: tuple[int, ...]) -> dict[str, np.ndarray]:
+    """The coordinates ``stage``, ``line``, ``column`` of a pass."""
+    return {"stage": np.asarray(st, dtype=np.int64), "line": np.arange(cfg.lines),
+            "column": np.arange(cfg.sensor.columns)}
+
+
+def pass_attrs(
+    cfg: BenchConfig, seed: int | np.random.SeedSequence | np.random.Generator, setup: RenderSetup, *,
+    fused: bool,
+) -> dict[str, Any]:
+    """The attributes of a pass's dataset: the resolved config as TOML text and its SHA-256, the
+    seed, the version, engine, variant, ``beta_bits``, pedestal [DN], ``t_int_s`` [s], frames and,
+    when fused, ``mu1`` and ``mu2``."""
+    attrs: dict[str, Any] = dict(
         title=f"bench_sim simulation of {cfg.name}",
         config=config_to_toml_text(cfg),
         config_sha256=config_sha256(cfg),
@@ -346,10 +412,10 @@ def _make_dataset(
         frames=int(setup.frames),
     )
     if isinstance(seed, np.random.SeedSequence):
-        ds.attrs.update(seed_entropy=str(seed.entropy), seed_spawn_key=str(list(seed.spawn_key)))
-    if "gamma_hdr" in arrays:
-        ds.attrs.update(mu1=int(cfg.fusion.mu1), mu2=int(cfg.fusion.mu2))
-    return ds
+        attrs.update(seed_entropy=str(seed.entropy), seed_spawn_key=str(list(seed.spawn_key)))
+    if fused:
+        attrs.update(mu1=int(cfg.fusion.mu1), mu2=int(cfg.fusion.mu2))
+    return attrs
 
 
 def run_pass(
@@ -360,6 +426,7 @@ def run_pass(
     truth: bool = True,
     on_frames: Callable[[int], None] | None = None,
     fixed_pattern: FixedPattern | None = None,
+    sink: Callable[[RenderSetup], PassSink] | None = None,
 ) -> PassResult:
     """Run one simulation pass: render, expose, accumulate stages and truth, fuse.
 
@@ -387,6 +454,11 @@ def run_pass(
         Use this physical sensor (its fixed patterns, shape ``(sensor.rows, sensor.columns)``)
         instead of the one drawn from ``seed`` (which is still drawn, so the temporal noise is
         the same): one camera for many passes (a dataset's ``camera = "fixed"``).
+    sink
+        Stream the pass instead of keeping it: called with the render set-up once it is made,
+        returns the :class:`~bench_sim.sensor.pass_lines.PassSink` that receives every variable's
+        completed lines (stage words, truth, fused image; as the dataset would hold them) while
+        the pass runs. The result then has no arrays (``stage_dn`` empty, no ``dataset``).
     """
     st = check_stages(stages, cfg.sensor.rows)
     rng = np.random.default_rng(seed)  # a Generator is used as is
@@ -405,21 +477,23 @@ def run_pass(
         fixed = fixed_pattern
     noise = seed_sequence(rng)
     fp = fixed if n_rows == cfg.sensor.rows else fixed.window(n_rows, n_cols)
-    word = VARIABLES_BY_NAME["dn"].array_dtype(cfg.dtdi.beta_bits)
-    dn_all = np.empty((len(st), cfg.lines, n_cols), dtype=word)
-    dn = {m: dn_all[s] for s, m in enumerate(st)}
+    stage_dtypes, image_dtypes = pass_dtypes(cfg, st, truth=truth)
+    array_sink = ArraySink(st, cfg.lines, n_cols, stage_dtypes, image_dtypes) if sink is None else None
+    out = array_sink if array_sink is not None else sink(setup)  # type: ignore[misc]
+    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
+    fuse = (mu1, mu2, lambda g1, g2: _fused(cfg, {mu1: g1, mu2: g2})) if image_dtypes else None
+    lines_out = LineAssembler(st, stage_dtypes, out, float(full_scale_dn(cfg.dtdi.beta_bits) - 1), fuse)
     stage_truth = None
     if truth:
         t0 = time.perf_counter()
-        dtypes = {v.name: v.array_dtype(cfg.dtdi.beta_bits) for v in pass_variables(STAGE_DIMS) if v.truth}
-        stage_truth = PassTruth(cfg, setup, fp, st, dtypes, pedestal_dn=_pedestal_dn(cfg),
-                                band_lines=TRUTH_BAND_LINES)
+        stage_truth = PassTruth(
+            cfg, setup, fp, st, pedestal_dn=_pedestal_dn(cfg), band_lines=TRUTH_BAND_LINES
+        )
         timings["truth"] += time.perf_counter() - t0
 
-    _stream(cfg, setup, fp, noise, dn, stage_truth, timings, on_frames)
-    if stage_truth is not None:
-        t0 = time.perf_counter()
-        stage_truth.finish(dn_all)
-        timings["truth"] += time.perf_counter() - t0
-    make = functools.partial(_make_dataset, cfg, seed, setup, st, dn_all, stage_truth)
+    _stream(cfg, setup, fp, noise, st, lines_out, stage_truth, timings, on_frames)
+    if array_sink is None:
+        return PassResult({}, setup, timings, None, truth=truth)
+    dn = {m: array_sink.arrays["dn"][s] for s, m in enumerate(st)}
+    make = functools.partial(_make_dataset, cfg, seed, setup, st, array_sink.arrays)
     return PassResult(dn, setup, timings, make, truth=truth)

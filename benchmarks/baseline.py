@@ -77,8 +77,10 @@ class Side:
         return env
 
     def python(self, *args: str, cwd: Path | None = None, **env: str) -> tuple[float, float]:
-        """Run ``python args`` of this side; wall time and CPU time [s] (the process and its children)."""
-        return timed_process([sys.executable, *args], self.env(**env), cwd=cwd)
+        """Run ``python -P args`` of this side; wall time and CPU time [s] (the process and its
+        children). ``-P``: the working folder is not put first on the import path, so a run from the
+        checkout's root cannot import this checkout on the baseline's side."""
+        return timed_process([sys.executable, "-P", *args], self.env(**env), cwd=cwd)
 
     def bench_sim(self, *args: str, cwd: Path | None = None, **env: str) -> tuple[float, float]:
         """Run ``bench-sim args`` of this side (as ``python -m bench_sim``)."""

@@ -1,94 +1,127 @@
-"""Cost of ``simulate`` (stage images + exact truth in one pass) against the render + sensor
-steps of ``reproduce``, and its peak memory at two numbers of lines.
+"""Cost of ``bench-sim simulate`` with every stage (streamed to its Zarr store) against stages
+{10, 80}, its peak memory at two numbers of lines, and both against a baseline revision.
 
-1. Time: ``simulate`` at the default size (1024 lines x 1024 columns, M = 100) with stages
-   {10, 80}, truth included (``mean_dn``, ``photons``, ``reflectance``, ``clipped``, ``gamma_hdr``),
-   against the pass ``reproduce`` made before it ran through ``simulate``: render set-up, every
-   frame rendered and streamed through the sensor and DTDI for its 21 stages
-   (:func:`bench_sim.sensor.stream.sensor_dtdi_pass`). Prints the ratio (target <= 1).
-2. Memory: peak of numpy's allocations (``tracemalloc``; Mitsuba's own buffers are not seen)
-   of ``simulate`` with stages {10, 80} at two line counts, split into what grows with the
-   lines: the requested stage images (dataset), and the texels the render's run texture holds
-   (a few blocks of rows, rasterised as the pass reaches them).
+1. Time: ``bench-sim simulate --stages all`` and ``--stages 10,80`` (truth included) on the paper
+   rig at 256 lines x 256 columns, wall time of the whole command (start-up included), paired and
+   interleaved runs (:func:`baseline.paired`) of this checkout and of the baseline revision
+   (:data:`baseline.BASELINE_REV`, ``--baseline``). Prints the medians and the ratio
+   all / {10, 80} per side (target <= 2) and this checkout / baseline per stage set.
+2. Memory: the peak resident set (``ru_maxrss`` of the command's own process, Mitsuba included)
+   of ``--stages all`` at two line counts (``--lines-a``, ``--lines-b``): flat in the number of
+   lines when the stages stream to disk (target: growth per line ~0).
 
-Usage: python benchmarks/bench_simulate.py [--lines-a 512] [--lines-b 2048] [--skip-time]
+Every command runs in a temporary folder: run from the repository root, ``python -m`` and
+``python -c`` would put this checkout's package first on the path whatever the side's
+``PYTHONPATH``.
+
+Usage: python benchmarks/bench_simulate.py [--repeat 3] [--lines-a 256] [--lines-b 1024]
+[--columns 256] [--baseline REV | --no-baseline] [--skip-time] [--skip-memory]
 """
 
 from __future__ import annotations
 
 import argparse
-import gc
-import time
-import tracemalloc
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
 
-import numpy as np
+from baseline import ROOT, Side, add_baseline_args, load_line, median, paired
 
-from bench_sim.config import load_config, with_overrides
-from bench_sim.pipeline import run_pass
-from bench_sim.workflows.reproduce.run import FIG3_STAGES
+STAGE_SETS = {"all": "all", "{10, 80}": "10,80"}
 
-STAGES = (10, 80)
+_RSS_SCRIPT = """
+import resource, runpy, sys
+sys.argv = ["bench-sim", *sys.argv[1:]]
+try:
+    runpy.run_module("bench_sim", run_name="__main__")
+except SystemExit as exc:
+    if exc.code:
+        raise
+print("MAXRSS_KIB", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+"""
 
 
-def _reproduce_pass(cfg) -> float:
-    from bench_sim.render.exposures import iter_photon_frames, prepare
-    from bench_sim.sensor.stream import sensor_dtdi_pass
-
-    stages = sorted(set(FIG3_STAGES) | {cfg.fusion.mu1, cfg.fusion.mu2})
-    rng = np.random.default_rng(0)
-    t0 = time.perf_counter()
-    setup = prepare(cfg, cfg.lines + max(stages) - 1, rng)
-    sensor_dtdi_pass(
-        iter_photon_frames(setup, chunk=64), cfg.sensor, cfg.dtdi, setup.geom.t_int_s, stages, rng,
-        lines=cfg.lines,
+def _config(folder: Path, lines: int, columns: int) -> Path:
+    """A TOML of the paper rig at ``lines`` x ``columns`` (its target panel as large)."""
+    path = folder / f"bench_{lines}x{columns}.toml"
+    base = ROOT / "bench_sim" / "scenes" / "paper_rig.toml"
+    path.write_text(
+        f'base = "{base}"\nlines = {lines}\n[sensor]\ncolumns = {columns}\n'
+        f"[target]\npanel_lines = {min(lines, 1024)}\npanel_columns = {columns}\n"
     )
-    return time.perf_counter() - t0
+    return path
 
 
-def _simulate(cfg) -> tuple[float, dict]:
-    t0 = time.perf_counter()
-    res = run_pass(cfg, STAGES, 0, truth=True)
-    return time.perf_counter() - t0, res.timings_s
+def _simulate_args(cfg: Path, stages: str, out: Path) -> list[str]:
+    return ["simulate", str(cfg), "--stages", stages, "--seed", "0", "--out", str(out), "--format", "zarr"]
 
 
-def _peak(cfg) -> tuple[float, float, float]:
-    """Peak traced MiB of a simulate pass, its dataset's MiB and the run texture's MiB."""
-    gc.collect()
-    tracemalloc.start()
-    res = run_pass(cfg, STAGES, 0, truth=True)
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
-    mib = 1 / 2**20
-    return peak * mib, res.dataset.nbytes * mib, res.setup.grid.held_bytes * mib
+def _peak_rss_mib(side: Side, cfg: Path, stages: str, out: Path) -> float:
+    """Peak resident set [MiB] of one ``bench-sim simulate`` process of ``side``."""
+    done = subprocess.run([sys.executable, "-c", _RSS_SCRIPT, *_simulate_args(cfg, stages, out)],
+                          env=side.env(), capture_output=True, text=True, cwd=out.parent)
+    if done.returncode != 0:
+        raise RuntimeError(f"simulate ({side.name}) exited {done.returncode}: {done.stderr[-2000:]}")
+    line = [t for t in done.stdout.splitlines() if t.startswith("MAXRSS_KIB")][-1]
+    return int(line.split()[1]) / 1024
+
+
+def _times(sides: list[Side], cfg: Path, tmp: Path, repeat: int) -> None:
+    print(f"time: simulate at {cfg.stem.removeprefix('bench_')} (lines x columns), {repeat} paired runs, "
+          f"wall [s] of the whole command")
+    med: dict[tuple[str, str], float] = {}
+    for label, stages in STAGE_SETS.items():
+        def run(side: Side, i: int, stages: str = stages) -> tuple[float, float]:
+            out = tmp / f"t_{abs(hash(side.name))}_{stages.replace(',', '_')}_{i}"
+            return side.bench_sim(*_simulate_args(cfg, stages, out), cwd=tmp)
+
+        got = paired(sides, run, repeat)
+        for side in sides:
+            walls = [w for w, _ in got[side.name]]
+            med[(side.name, label)] = median(walls)
+            print(f"  {side.name:<22} stages {label:<9} median {median(walls):7.2f} s  "
+                  f"(runs {', '.join(f'{w:.2f}' for w in walls)})")
+    for side in sides:
+        ratio = med[(side.name, "all")] / med[(side.name, "{10, 80}")]
+        print(f"  {side.name:<22} all / {{10, 80}} = {ratio:.2f} (target <= 2)")
+    if len(sides) == 2:
+        for label in STAGE_SETS:
+            ratio = med[(sides[0].name, label)] / med[(sides[1].name, label)]
+            print(f"  stages {label:<9} {sides[0].name} / {sides[1].name} = {ratio:.2f}")
+
+
+def _memory(sides: list[Side], tmp: Path, lines: tuple[int, int], columns: int) -> None:
+    print(f"memory: peak RSS of simulate --stages all at {columns} columns")
+    for side in sides:
+        peaks = []
+        for n in lines:
+            cfg = _config(tmp, n, columns)
+            peaks.append(_peak_rss_mib(side, cfg, "all", tmp / f"m_{abs(hash(side.name))}_{n}"))
+            print(f"  {side.name:<22} {n:6d} lines: peak {peaks[-1]:8.1f} MiB")
+        growth = (peaks[1] - peaks[0]) * 1024 / (lines[1] - lines[0])
+        print(f"  {side.name:<22} growth {growth:.1f} KiB per line (flat: ~0)")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--lines-a", type=int, default=512)
-    ap.add_argument("--lines-b", type=int, default=2048)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--lines-a", type=int, default=256)
+    ap.add_argument("--lines-b", type=int, default=1024)
+    ap.add_argument("--columns", type=int, default=256)
     ap.add_argument("--skip-time", action="store_true")
+    ap.add_argument("--skip-memory", action="store_true")
+    add_baseline_args(ap)
     a = ap.parse_args()
-    cfg = load_config()
-    if not a.skip_time:
-        t_rep = _reproduce_pass(cfg)
-        t_sim, steps = _simulate(cfg)
-        print(f"default size: {cfg.lines} lines x {cfg.sensor.columns} columns, M = {cfg.sensor.rows}")
-        print(f"  reproduce render + sensor/DTDI (21 stages, {cfg.lines + 99} frames): {t_rep:7.2f} s")
-        print(f"  simulate stages {set(STAGES)} + truth ({cfg.lines + 79} frames):    {t_sim:7.2f} s")
-        for k, v in steps.items():
-            print(f"    {k:<14} {v:7.2f} s")
-        print(f"  ratio simulate / reproduce pass = {t_sim / t_rep:.2f} (target <= 1.0)")
-    rows = []
-    for lines in (a.lines_a, a.lines_b):
-        peak, ds_mib, tex_mib = _peak(with_overrides(cfg, {"lines": lines}))
-        rows.append((lines, peak, ds_mib, tex_mib))
-        print(f"  {lines:6d} lines: peak {peak:8.1f} MiB (numpy), dataset {ds_mib:7.1f} MiB, "
-              f"run texture held {tex_mib:7.1f} MiB")
-    (l1, p1, d1, t1), (l2, p2, d2, t2) = rows
-    per_line = 2**20 / (l2 - l1)
-    kib = per_line / 1024
-    print(f"  growth per line: peak {(p2 - p1) * kib:.1f} KiB, of which stage images {(d2 - d1) * kib:.1f} "
-          f"KiB and the render's run texture {(t2 - t1) * kib:.1f} KiB (the blocks of rows it keeps)")
+    sides = [Side.current()] + ([] if a.no_baseline else [Side.of_rev(a.baseline)])
+    print(load_line())
+    with tempfile.TemporaryDirectory(prefix="bench_simulate_") as name:
+        tmp = Path(name)
+        if not a.skip_time:
+            _times(sides, _config(tmp, 256, a.columns), tmp, a.repeat)
+        if not a.skip_memory:
+            _memory(sides, tmp, (a.lines_a, a.lines_b), a.columns)
+    print(load_line())
 
 
 if __name__ == "__main__":

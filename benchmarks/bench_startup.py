@@ -41,7 +41,7 @@ def _import_shares(side: Side) -> list[tuple[str, float]]:
     """Self import time [ms] per top-level package of ``import bench_sim.cli`` (median of 3)."""
     per: dict[str, list[float]] = collections.defaultdict(list)
     for _ in range(3):
-        done = subprocess.run([sys.executable, "-X", "importtime", "-c", "import bench_sim.cli"],
+        done = subprocess.run([sys.executable, "-P", "-X", "importtime", "-c", "import bench_sim.cli"],
                               env=side.env(), capture_output=True, text=True, check=True)
         tot: collections.Counter[str] = collections.Counter()
         for line in done.stderr.splitlines():

@@ -258,7 +258,7 @@ class SensorConfig(Section):
         "hybrid",
         description="shot noise draws: 'poisson' exact everywhere; 'hybrid' exact below 30 mean "
         "electrons and a rounded third-order Cornish-Fisher normal above (same mean, variance and "
-        "skewness; ~4x faster; see bench_sim.sensor.emva.shot_electrons)",
+        "skewness; the sensor pass ~5x faster; see bench_sim.sensor.sampler.shot_electrons)",
     )
     dark_noise: bool = True
     read_noise: bool = True

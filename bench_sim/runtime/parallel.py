@@ -15,6 +15,11 @@ Pool
     One process-wide :class:`concurrent.futures.ThreadPoolExecutor` per thread count runs *leaf*
     tasks: tasks that never wait for other tasks of the pool. :func:`parallel_map` called from
     inside a pool thread runs its pieces in that thread, so nesting cannot deadlock.
+
+Lane
+    :class:`Lane`: one more thread that runs a workflow's independent *steps* in order beside
+    the caller's (a step may use the pool: it is no pool thread). With one thread the steps run
+    in the caller when their results are asked for: the same numbers either way.
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ __all__ = [
     "seed_sequence",
     "child_sequence",
     "chunk_generator",
+    "Lane",
 ]
 
 T = TypeVar("T")
@@ -175,6 +181,74 @@ def prefetch(items: Iterable[T], depth: int = 1, threads: int | None = None) -> 
             except queue.Empty:
                 pass
         worker.join()
+
+
+class Lane:
+    """Steps of a workflow run in order on one background thread beside the caller's
+    (``threads`` > 1, default :func:`thread_count`), or deferred in the caller with one thread.
+
+    :meth:`submit` returns a function that waits for the step's result (and raises its error).
+    Used as a context manager: on a normal exit it waits for every step (the first error is
+    raised); on an error it drops the steps not started and waits for the running one, so no
+    step outlives the block (nor writes into a folder the caller removes).
+    """
+
+    def __init__(self, threads: int | None = None) -> None:
+        n = thread_count() if threads is None else int(threads)
+        self._ex = ThreadPoolExecutor(1, thread_name_prefix="bench_sim-lane") if n > 1 else None
+        self._futures: list[Future[object]] = []
+        self._deferred: list[Callable[[], object]] = []
+
+    @property
+    def parallel(self) -> bool:
+        """Whether the steps run on their own thread."""
+        return self._ex is not None
+
+    def submit(self, step: Callable[[], R]) -> Callable[[], R]:
+        """Queue ``step``; returns the wait for its result."""
+        if self._ex is None:
+            done: list[R] = []
+
+            def run() -> R:
+                if not done:
+                    done.append(step())
+                return done[0]
+
+            self._deferred.append(run)
+            return run
+        fut = self._ex.submit(step)
+        self._futures.append(fut)  # type: ignore[arg-type]
+        return fut.result
+
+    def join(self) -> None:
+        """Wait for every step queued (run the deferred ones); raise the first error."""
+        for run in self._deferred:
+            run()
+        for f in self._futures:
+            f.result()
+
+    def cancel(self) -> None:
+        """Drop the steps not started, wait for the running one; errors are dropped."""
+        self._deferred.clear()
+        for f in self._futures:
+            f.cancel()
+        if self._ex is not None:
+            self._ex.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> Lane:
+        return self
+
+    def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
+        if exc_type is not None:
+            self.cancel()
+            return
+        try:
+            self.join()
+        except BaseException:
+            self.cancel()
+            raise
+        if self._ex is not None:
+            self._ex.shutdown(wait=True)
 
 
 def seed_sequence(seed: int | np.random.SeedSequence | np.random.Generator) -> np.random.SeedSequence:

@@ -11,7 +11,7 @@ the word's clip folded into the read's) and ``clipped``; ``reflectance`` per ban
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -26,37 +26,61 @@ from bench_sim.sensor.stage_truth import (
     row_footprints,
     stage_dark_offset_dn,
     stage_mean_dn,
-    stage_reflectance,
+    stages_reflectance,
 )
 from bench_sim.sensor.stream import Exposed
 
-__all__ = ["PassTruth", "TRUTH_QUANTITIES"]
+__all__ = ["PassTruth", "TruthBlock", "TRUTH_QUANTITIES"]
 
 #: per-read quantities the truth sums over a stage's rows: photons, PRNU-weighted photons, the
-#: cumulants of the clipped read, the saturation flag, and row 0's read with the word's clip folded in
-TRUTH_QUANTITIES = ("photons", "gain_photons", "k1", "k2", "k3", "saturated", "k1_stage1")
+#: cumulants of the clipped read and the saturation flag (row 0's read with the word's clip folded
+#: in, stage 1's mean, is kept apart: it is not summed)
+TRUTH_QUANTITIES = ("photons", "gain_photons", "k1", "k2", "k3", "saturated")
+
+
+@dataclass(frozen=True)
+class TruthBlock:
+    """Consecutive lines of one truth variable of one stage.
+
+    Attributes
+    ----------
+    name
+        ``photons`` [photons], ``linear_dn``, ``mean_dn`` [DN] (float64), ``clipped`` (bool: a read
+        saturated; the word's clip is not in yet) or ``reflectance`` (float64, 0..1).
+    stage
+        The stage ``m``.
+    line0
+        Scene line of ``values[0]``.
+    values
+        (n, N) lines ``line0 .. line0 + n - 1``.
+    """
+
+    name: str
+    stage: int
+    line0: int
+    values: np.ndarray
 
 
 class PassTruth:
     """The truth of a pass, accumulated chunk by chunk (:mod:`bench_sim.sensor.stage_truth`):
     ``photons``, ``mean_dn``, ``linear_dn``, ``clipped`` per stage line, ``reflectance`` per band
-    of ``band_lines`` lines, into ``arrays`` (name -> (stages, lines, columns), of ``dtypes``)."""
+    of ``band_lines`` lines; :meth:`push` returns the :class:`TruthBlock` of the lines each chunk
+    completes, so nothing here grows with the number of lines."""
 
     def __init__(
-        self, cfg: BenchConfig, setup: RenderSetup, fp: FixedPattern, st: tuple[int, ...],
-        dtypes: Mapping[str, np.dtype], *, pedestal_dn: float, band_lines: int = 256,
+        self, cfg: BenchConfig, setup: RenderSetup, fp: FixedPattern, st: tuple[int, ...], *,
+        pedestal_dn: float, band_lines: int = 256,
     ) -> None:
         self.cfg, self.setup, self.st, self.band_lines = cfg, setup, st, int(band_lines)
         self.lines, n_cols = cfg.lines, cfg.sensor.columns
         beta, ped = cfg.dtdi.beta_bits, float(pedestal_dn)
-        shape = (len(st), self.lines, n_cols)
-        self.arrays = {name: np.empty(shape, dtype=dt) for name, dt in dtypes.items()}
         self.sums = StageSums(n_cols, st, len(TRUTH_QUANTITIES))
         self.read_model = ReadModel.of(cfg.sensor)
         black = cfg.sensor.black_offset_dn if cfg.dtdi.subtract_black else 0.0
         #: the word's shift (- m b + P) per stage, and the word's clip folded into one read (m = 1)
         self.shift = {m: ped - m * black for m in st}
-        top = min(self.read_model.top_dn, full_scale_dn(beta) - 1 + black - ped)
+        self.word = float(full_scale_dn(beta) - 1)
+        top = min(self.read_model.top_dn, self.word + black - ped)
         self.fold = (max(0.0, black - ped), top)
         self.done = dict.fromkeys(st, 0)
         self.refl_done = 0
@@ -67,76 +91,101 @@ class PassTruth:
             )
             for m in st
         }
+        self.offset_stack = np.stack([self.offsets[m] for m in st])
         self.footprints = row_footprints(cfg, setup.geom, setup.grid, st[-1])
         self.gain = fp.prnu_gain
+        self.qe_gain = cfg.sensor.quantum_efficiency * fp.prnu_gain
         self.dark_e = fp.dark_current_e_s * t_int
         self.offset_dn = cfg.sensor.black_offset_dn + fp.column_offset_dn
+        self._buf: np.ndarray | None = None
 
-    def push(self, got: Exposed) -> None:
-        """Add one exposed chunk (its photons and saturated reads)."""
-        a = self.arrays
-        stack = self._read_quantities(got)
-        word, lattice = float(full_scale_dn(self.cfg.dtdi.beta_bits) - 1), self.cfg.sensor.quantization
-        for frame in stack:
-            for m, line in self.sums.push(frame).items():
-                s, j = self.st.index(m), self.done[m]
-                if j < self.lines:
-                    q = dict(zip(TRUTH_QUANTITIES, line, strict=True))
-                    a["photons"][s, j] = q["photons"]
-                    a["linear_dn"][s, j] = stage_mean_dn(q["gain_photons"], self.cfg.sensor, self.offsets[m])
-                    if m == 1:
-                        a["mean_dn"][s, j] = q["k1_stage1"] + self.shift[1]
-                    else:
-                        a["mean_dn"][s, j] = clipped_sum_mean(
-                            q["k1"] + self.shift[m], q["k2"], q["k3"], 0.0, word, lattice=lattice
-                        )
-                    a["clipped"][s, j] = q["saturated"] > 0
-                    self.done[m] = j + 1
+    def push(self, got: Exposed) -> list[TruthBlock]:
+        """Add one exposed chunk (its photons and saturated reads); the truth of the lines it completed."""
+        stack, k1_stage1 = self._read_quantities(got)
+        parts = []
+        for m, sums in self.sums.push(stack).items():
+            j0 = self.done[m]
+            n = min(sums.shape[1], self.lines - j0)
+            if n > 0:
+                parts.append((m, j0, sums[:, :n]))
+                self.done[m] = j0 + n
+        out = self._stage_lines(parts, k1_stage1) if parts else []
         complete = min(self.done.values())
-        if complete - self.refl_done >= self.band_lines or complete == self.lines:
-            self._reflectance_band(complete)
+        if complete - self.refl_done >= self.band_lines or (complete == self.lines > self.refl_done):
+            out.extend(self._reflectance_bands(complete))
+        return out
 
-    def _read_quantities(self, got: Exposed) -> np.ndarray:
-        """Per read of a chunk (frames, R, Q, N): the quantities :data:`TRUTH_QUANTITIES` that the stages
-        sum; the cumulants of every clipped read (:func:`bench_sim.sensor.expectation.read_cumulants`)."""
+    def _stage_lines(
+        self, parts: list[tuple[int, int, np.ndarray]], k1_stage1: np.ndarray | None
+    ) -> list[TruthBlock]:
+        """The truth of the lines of every stage a chunk completed, ``(m, j0, (Q, n, N) sums)`` per
+        stage, in one vectorised step over all of them (the same operations per pixel as stage by
+        stage)."""
+        counts = [p[2].shape[1] for p in parts]
+        whole = sum(counts) == self.sums.block.shape[1]  # nothing cut at the last line: one block
+        sums = self.sums.block if whole else np.concatenate([p[2] for p in parts], axis=1)
+        q = dict(zip(TRUTH_QUANTITIES, sums, strict=True))
+        index = [self.st.index(m) for m, _, _ in parts]
+        shift = np.repeat([self.shift[m] for m, _, _ in parts], counts)[:, None]
+        offsets = np.repeat(self.offset_stack[index], counts, axis=0)
+        lattice = self.cfg.sensor.quantization
+        values = {
+            "photons": q["photons"],
+            "linear_dn": stage_mean_dn(q["gain_photons"], self.cfg.sensor, offsets),
+            "mean_dn": clipped_sum_mean(q["k1"] + shift, q["k2"], q["k3"], 0.0, self.word, lattice=lattice),
+            "clipped": q["saturated"] > 0,
+        }
+        if parts[0][0] == 1 and k1_stage1 is not None:  # stage 1's lines are this chunk's frames
+            values["mean_dn"][: counts[0]] = (0.0 + k1_stage1[: counts[0]]) + self.shift[1]
+        out: list[TruthBlock] = []
+        start = 0
+        for (m, j0, _), n in zip(parts, counts, strict=True):
+            out.extend(TruthBlock(name, m, j0, v[start : start + n]) for name, v in values.items())
+            start += n
+        return out
+
+    def _read_quantities(self, got: Exposed) -> tuple[list[np.ndarray], np.ndarray | None]:
+        """Per read of a chunk (C frames, R rows, N columns): the (C, R, N) quantities
+        :data:`TRUTH_QUANTITIES` that the stages sum, the cumulants of every clipped read
+        (:func:`bench_sim.sensor.expectation.read_cumulants`); and row 0's mean read with the
+        word's clip folded in, (C, N), when stage 1 is requested."""
         sensor, ph = self.cfg.sensor, got.photons
         rows = ph.shape[1]
-        light = ph * (sensor.quantum_efficiency * self.gain[:rows])
+        if self._buf is None or self._buf.shape[1:] != ph.shape:  # reused: no page faults per chunk
+            self._buf = np.empty((5, *ph.shape), dtype=np.float64)
+        gain_photons, light, k1, k2, k3 = self._buf
+        np.multiply(ph, self.gain[:rows], out=gain_photons)
+        np.multiply(ph, self.qe_gain[:rows], out=light)
         dark = np.broadcast_to(self.dark_e[:rows], ph.shape)
+        det: np.ndarray
         if sensor.shot_noise and not sensor.dark_noise:
             lam, det = light, dark
         elif sensor.dark_noise and not sensor.shot_noise:
             lam, det = dark, light
         else:
-            lam, det = light + dark, np.zeros(())
+            lam, det = np.add(light, dark, out=light), np.zeros(())
         noisy = sensor.shot_noise or sensor.dark_noise
-        stack = np.zeros((ph.shape[0], self.st[-1], len(TRUTH_QUANTITIES), ph.shape[2]), dtype=np.float64)
-        q = {name: i for i, name in enumerate(TRUTH_QUANTITIES)}
-        stack[:, :, q["photons"]] = ph
-        np.multiply(ph, self.gain[:rows], out=stack[:, :, q["gain_photons"]])
-        k1, k2, k3 = read_cumulants(lam, det, self.offset_dn, self.read_model, noisy=noisy)
-        stack[:, :, q["k1"]], stack[:, :, q["k2"]], stack[:, :, q["k3"]] = k1, k2, k3
-        stack[:, :, q["saturated"]] = got.saturated
+        k1_stage1 = None
         if 1 in self.st:  # stage 1 is one read: the word's clip folds into the read's (exact)
             bdet = det if np.ndim(det) == 0 else det[:, 0]
-            stack[:, 0, q["k1_stage1"]] = read_cumulants(
+            k1_stage1 = read_cumulants(
                 lam[:, 0], bdet, self.offset_dn, self.read_model, noisy=noisy, lo_dn=self.fold[0],
                 hi_dn=self.fold[1],
             )[0]
-        return stack
+        read_cumulants(lam, det, self.offset_dn, self.read_model, noisy=noisy, out=(k1, k2, k3))
+        saturated = got.saturated if got.saturated is not None else np.zeros(ph.shape, dtype=bool)
+        return [ph, gain_photons, k1, k2, k3, saturated], k1_stage1
 
-    def _reflectance_band(self, upto: int) -> None:
-        grid, q, refl = self.setup.grid, self.setup.grid.q, self.arrays["reflectance"]
+    def _reflectance_bands(self, upto: int) -> list[TruthBlock]:
+        """The reflectance of lines ``refl_done .. upto - 1`` of every stage, band by band."""
+        grid, q = self.setup.grid, self.setup.grid.q
+        out: list[TruthBlock] = []
         start = self.refl_done
         while start < upto:
             stop = min(start + self.band_lines, upto)
             r0, r1 = reflectance_rows(self.footprints, q, self.st[-1], start, stop)
-            band = grid.rows(r0, r1)
-            for s, m in enumerate(self.st):
-                refl[s, start:stop] = stage_reflectance(band, q, self.footprints, m, start, stop, row0=r0)
+            refl = stages_reflectance(grid.rows(r0, r1), q, self.footprints, self.st, start, stop, row0=r0)
+            out.extend(TruthBlock("reflectance", m, start, refl[s]) for s, m in enumerate(self.st))
             start = stop
         self.refl_done = start
-
-    def finish(self, dn_all: np.ndarray) -> None:
-        """Mark the words that hit the top of the word as clipped."""
-        self.arrays["clipped"] |= dn_all >= full_scale_dn(self.cfg.dtdi.beta_bits) - 1
+        return out

@@ -20,9 +20,10 @@ A stage-``m`` pixel (scene line ``j``, column ``n``) sums the reads of sensor ro
     stage pixel walk ``e`` object pixels apart per row, and the truth moves and widens with them.
     Optical blur (defocus, diffraction) is not part of the footprint.
 
-Memory: :class:`StageSums` keeps a ring of ``max(stages)`` partial line sums (as the DTDI
-accumulator does) and :func:`stage_reflectance` works on a band of output lines at a time, so
-only the requested stage images grow with the number of lines.
+Memory: :class:`StageSums` carries the ``max(stages) - 1`` partial line sums in progress (as the
+DTDI accumulator's ring does) and :func:`stages_reflectance` works on a band of output lines at a
+time, so only the requested stage images grow with the number of lines (and nothing does when the
+pass streams them to a sink, :func:`bench_sim.pipeline.run_pass`).
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ __all__ = [
     "RowFootprints",
     "row_footprints",
     "stage_reflectance",
+    "stages_reflectance",
     "reflectance_rows",
     "StageSums",
     "stage_dark_offset_dn",
@@ -200,12 +202,7 @@ def stage_reflectance(
         return out
     ny = values.shape[0]
     for group in np.unique(fp.x_group[:m]):
-        rows = [i for i in range(m) if fp.x_group[i] == group]
-        offs = [int(fp.y_base[i]) + i * q for i in rows]
-        lo = min(offs)
-        kern = np.zeros(max(o + fp.y_weights[i].size for o, i in zip(offs, rows, strict=True)) - lo)
-        for o, i in zip(offs, rows, strict=True):
-            kern[o - lo : o - lo + fp.y_weights[i].size] += fp.y_weights[i]
+        kern, lo = _summed_kernel(fp, q, [i for i in range(m) if fp.x_group[i] == group])
         start0 = int(line0) * q + lo - int(row0)
         if start0 < 0 or start0 + (nl - 1) * q + kern.size > ny:
             raise BenchSimError("stage truth: requested lines fall outside the run texture")
@@ -217,36 +214,104 @@ def stage_reflectance(
     return out / m
 
 
+def stages_reflectance(
+    values: np.ndarray, q: int, fp: RowFootprints, stages: Sequence[int], line0: int, line1: int,
+    row0: int = 0,
+) -> np.ndarray:
+    """:func:`stage_reflectance` of several stages at once, (S, line1 - line0, N) float64.
+
+    The texture is projected across the track first (one sparse product per across-track
+    matrix: ``P_g = values X_g^T``, (rows, N)); the stages then grow row by row,
+    ``m rho_m = (m' rho_m') + sum_{m' <= i < m} <along-track footprint of row i, P_g(i)>`` between
+    consecutive requested stages ``m' < m``, the rows of one group sharing one summed kernel.
+    Equal to :func:`stage_reflectance` up to the order of the float sums.
+    """
+    st = tuple(sorted(int(m) for m in stages))
+    if st and st[-1] > len(fp.y_weights):
+        raise BenchSimError(f"stage {st[-1]}: footprints known for {len(fp.y_weights)} rows only")
+    nl = int(line1) - int(line0)
+    n_cols = fp.x_matrices[0].shape[0]
+    out = np.zeros((len(st), max(nl, 0), n_cols), dtype=np.float64)
+    if nl <= 0 or not st:
+        return out
+    vt = np.ascontiguousarray(np.asarray(values, dtype=np.float64).T)  # (nx, rows)
+    proj: dict[int, np.ndarray] = {}
+    acc = np.zeros((n_cols, nl), dtype=np.float64)  # m rho_m, columns first
+    prev = 0
+    for s, m in enumerate(st):
+        for group in np.unique(fp.x_group[prev:m]):
+            g = int(group)
+            if g not in proj:
+                proj[g] = np.asarray(fp.x_matrices[g] @ vt)  # (N, rows)
+            rows = [i for i in range(prev, m) if fp.x_group[i] == g]
+            kern, lo = _summed_kernel(fp, q, rows)
+            start0 = int(line0) * q + lo - int(row0)
+            if start0 < 0 or start0 + (nl - 1) * q + kern.size > vt.shape[1]:
+                raise BenchSimError("stage truth: requested lines fall outside the run texture")
+            for c in np.nonzero(kern)[0]:
+                a = start0 + int(c)
+                acc += kern[c] * proj[g][:, a : a + (nl - 1) * q + 1 : q]
+        out[s] = acc.T / m
+        prev = m
+    return out
+
+
+def _summed_kernel(fp: RowFootprints, q: int, rows: Sequence[int]) -> tuple[np.ndarray, int]:
+    """The along-track weights of ``rows`` summed on one texel axis, and its first texel row
+    (frame 0, line 0: row ``i`` sits ``i q`` rows further along, eq. 1-2)."""
+    offs = [int(fp.y_base[i]) + i * q for i in rows]
+    lo = min(offs)
+    kern = np.zeros(max(o + fp.y_weights[i].size for o, i in zip(offs, rows, strict=True)) - lo)
+    for o, i in zip(offs, rows, strict=True):
+        kern[o - lo : o - lo + fp.y_weights[i].size] += fp.y_weights[i]
+    return kern, lo
+
+
 class StageSums:
     """Float DTDI sums of per-pixel quantities: for every stage ``m`` and scene line ``j``,
     ``sum_{i < m} v[frame j + i, row i]`` (paper eq. 1-2 without the output word).
 
-    A ring of ``max(stages)`` partial sums, as :class:`bench_sim.sensor.dtdi.DTDIAccumulator`
-    keeps, so memory does not grow with the number of lines. Each frame holds ``Q`` quantities
-    per pixel, shape (R, Q, N) with ``R >= max(stages)`` rows.
+    Works a chunk of frames at a time, by diagonal: for row ``i = 0, 1, ...`` the chunk's row-``i``
+    values are added to scene lines ``j = k - i`` of its frames ``k`` in one vectorised step, and
+    when ``i`` reaches ``m - 1`` those lines of stage ``m`` are complete. Every line sums its rows
+    in the order ``i = 0, 1, ...`` from ``0.0``, as a per-frame ring would. Only the
+    ``max(stages) - 1`` lines in progress are carried between chunks, so memory does not grow
+    with the number of lines. A chunk holds ``Q`` quantities per pixel, each (C, R, N) with
+    ``R >= max(stages)`` rows.
     """
 
     def __init__(self, n_columns: int, stages: Sequence[int], n_quantities: int) -> None:
         self.stages = tuple(sorted(int(m) for m in stages))
         self.ring_rows = self.stages[-1]
-        self._ring = np.zeros((self.ring_rows, int(n_quantities), int(n_columns)), dtype=np.float64)
+        self._carry = np.zeros((int(n_quantities), self.ring_rows - 1, int(n_columns)), dtype=np.float64)
         self.frames_seen = 0
+        self.block = np.empty((int(n_quantities), 0, int(n_columns)))
 
-    def push(self, frame: np.ndarray) -> dict[int, np.ndarray]:
-        """Add one (R, Q, N) frame; return stage -> its completed line's (Q, N) sums."""
-        r_rows = self.ring_rows
-        k = self.frames_seen
-        r = k % r_rows
-        self._ring[r::-1] += frame[: r + 1]
-        if r + 1 < r_rows:
-            self._ring[r_rows - 1 : r : -1] += frame[r + 1 : r_rows]
-        out = {}
-        for m in self.stages:
-            j = k - m + 1
-            if j >= 0:
-                out[m] = self._ring[j % r_rows].copy()
-        self._ring[(k - r_rows + 1) % r_rows] = 0.0
-        self.frames_seen = k + 1
+    def push(self, chunk: Sequence[np.ndarray]) -> dict[int, np.ndarray]:
+        """Add one chunk of ``C`` frames, its ``Q`` quantities each (C, R, N) (any real or bool
+        dtype; summed in float64); return stage ``m`` -> the (Q, n, N) sums of the lines it
+        completed (continuing the previous block; lines before 0 are left out), views into
+        :attr:`block` in stage order."""
+        r_rows, n_frames = self.ring_rows, chunk[0].shape[0]
+        k0 = self.frames_seen
+        acc = np.zeros((len(chunk), r_rows - 1 + n_frames, chunk[0].shape[2]), dtype=np.float64)
+        acc[:, : r_rows - 1] = self._carry
+        # lines k0 - i + first .. of stage i + 1 are >= 0; buffer index of line k0 - i: R - 1 - i
+        firsts = {m: max(0, m - 1 - k0) for m in self.stages}
+        sizes = {m: max(n_frames - f, 0) for m, f in firsts.items()}
+        #: the completed lines of all stages, one block (stage by stage, as ``out``'s views)
+        self.block = np.empty((len(chunk), sum(sizes.values()), acc.shape[2]))
+        ends = np.cumsum(list(sizes.values()))
+        out = {m: self.block[:, e - n : e] for (m, n), e in zip(sizes.items(), ends, strict=True)}
+        for q, values in enumerate(chunk):  # one quantity at a time: its buffer stays in cache
+            acc_q = acc[q]
+            for i in range(r_rows):
+                lo = r_rows - 1 - i
+                acc_q[lo : lo + n_frames] += values[:, i]
+                if i + 1 in out:
+                    out[i + 1][q] = acc_q[lo + firsts[i + 1] : lo + n_frames]
+        self._carry = acc[:, n_frames:].copy()
+        self.frames_seen = k0 + n_frames
         return out
 
 

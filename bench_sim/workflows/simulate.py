@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -34,10 +34,13 @@ from bench_sim.pipeline import (
     pass_variables,
     run_pass,
 )
+from bench_sim.render.exposures import RenderSetup
 from bench_sim.runtime.provenance import provenance
 from bench_sim.sensor.dtdi import frames_needed
+from bench_sim.sensor.pass_lines import PassSink
 from bench_sim.workflows.estimates import estimate_simulate
 from bench_sim.workflows.preflight import check_seed, preflight
+from bench_sim.workflows.simulate_store import ZarrPassSink
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -93,7 +96,8 @@ def simulate(
     xarray.Dataset
         Dimensions ``stage``, ``line``, ``column``; variables ``dn``, ``mean_dn``, ``photons``,
         ``reflectance``, ``clipped`` and, when ``fusion.mu1`` and ``fusion.mu2`` are among the
-        stages, ``gamma_hdr`` and ``gamma_hdr_source`` (see the module docstring). With a
+        stages, ``gamma_hdr`` and ``gamma_hdr_source`` and, from the truth, the maps
+        ``gamma_hdr_error`` and ``tdi_light_ratio`` (see the module docstring). With a
         ``slanted_edges`` target also the ISO 12233 e-SFR along and across the track of every
         stage and of ``gamma_hdr``: ``sfr_along``, ``sfr_across`` (stage, sfr_frequency),
         ``mtf50_along``, ``mtf50_across`` (stage) [cycles/px], ``gamma_hdr_sfr_*`` and
@@ -103,8 +107,16 @@ def simulate(
     st = check_stages(stages, cfg.sensor.rows)
     seed = check_seed(seed, "seed")
     check_inputs(cfg, st)
+    return _with_sharpness(_run(cfg, st, int(seed), progress).dataset, cfg)
+
+
+def _run(
+    cfg: BenchConfig, st: tuple[int, ...], seed: int, progress: bool,
+    sink: Callable[[RenderSetup], PassSink] | None = None,
+) -> PassResult:
+    """:func:`run_pass` of the run, with a progress bar over the frames when ``progress``."""
     if not progress:
-        return _with_sharpness(run_pass(cfg, st, int(seed)).dataset, cfg)
+        return run_pass(cfg, st, seed, sink=sink)
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     with Progress(
@@ -115,8 +127,7 @@ def simulate(
         TimeRemainingColumn(),
     ) as bar:
         task = bar.add_task("pass", total=frames_needed(cfg.lines, st))
-        ds = run_pass(cfg, st, int(seed), on_frames=lambda n: bar.update(task, advance=n)).dataset
-    return _with_sharpness(ds, cfg)
+        return run_pass(cfg, st, seed, on_frames=lambda n: bar.update(task, advance=n), sink=sink)
 
 
 def _with_sharpness(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
@@ -208,7 +219,7 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
         for var in pass_variables(STAGE_DIMS):
             if var.name in ds:
                 put(f"stage_{int(m):03d}_{var.name}.tiff", ds[var.name].sel(stage=m).values, var, int(m))
-    for var in pass_variables(IMAGE_DIMS):
+    for var in pass_variables(IMAGE_DIMS, maps=True):
         if var.name in ds:
             put(f"{var.name}.tiff", ds[var.name].values, var, None)
     sharp = sharpness_summary(ds)  # the MTF50s of a slanted-edge target (none otherwise)
@@ -222,7 +233,10 @@ def run_simulate(
     """``bench-sim simulate``: check every input, simulate, write the output set into ``out``.
 
     Bad stages, formats, image files or output folders are reported (one line, exit 2) before
-    any rendering; nothing is written unless the whole set is complete.
+    any rendering; nothing is written unless the whole set is complete. ``zarr`` (but for a
+    slanted-edge target, whose e-SFR needs the whole images) streams the stages into the store
+    as the pass completes them (:mod:`bench_sim.workflows.simulate_store`): memory stays flat in
+    the number of lines, and the store's bytes are those of the dataset written at the end.
     """
     if fmt not in FORMATS:
         raise BenchSimError(f"--format = {fmt!r}: allowed {', '.join(FORMATS)}")
@@ -230,12 +244,22 @@ def run_simulate(
     cfg = load_config(config)
     st = parse_stages_arg(stages, cfg.sensor.rows)
     check_inputs(cfg, st, out, fmt)
-    ds = simulate(cfg, stages=st, seed=seed, progress=progress)
-    meta = provenance(
-        cfg, seed, kind="simulation", stages=list(st), engine=ds.attrs["engine"], variant=ds.attrs["variant"]
-    )
+    meta = provenance(cfg, seed, kind="simulation", stages=list(st))
     record = {"command": "simulate", "version": meta["version"], "seed": int(seed),
               "config_sha256": meta["config_sha256"], "format": fmt, "stages": list(st)}
+    if fmt == "zarr" and not has_slanted_edges(cfg):  # streamed: stages written as they complete
+        with output_set(out, record) as tmp:
+            sinks: list[ZarrPassSink] = []
+
+            def sink(setup: RenderSetup) -> ZarrPassSink:
+                sinks.append(ZarrPassSink(tmp / FORMATS["zarr"], cfg, st, int(seed), setup, truth=True))
+                return sinks[-1]
+
+            _run(cfg, st, int(seed), progress, sink)
+            sinks[0].close()
+        return Path(out)
+    ds = simulate(cfg, stages=st, seed=seed, progress=progress)
+    meta.update(engine=ds.attrs["engine"], variant=ds.attrs["variant"])
     with output_set(out, record) as tmp:
         write_simulation(ds, tmp, fmt, meta)
     return Path(out)

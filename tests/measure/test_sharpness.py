@@ -125,11 +125,20 @@ def test_gamma_hdr_and_variables(passes) -> None:
 
 
 def test_noise_on_keeps_the_mtf50_and_clipped_stages_give_nan() -> None:
+    # noise scatters one image's MTF50 by a few per cent (stage 1 most) and raises it slightly (the
+    # noise's own high-frequency power in the edge's derivative, ~1.5 % at stage 16 here): over
+    # seeds, the mean of noisy / noiseless is 1 within 3 % plus 3 standard errors of the scatter
     cfg = _bench(0.0, noise=True)
-    ds = add_sharpness(run_pass(cfg, (1, 16), 3).dataset, cfg)
     quiet = add_sharpness(run_pass(_bench(0.0), (1, 16), 3).dataset, _bench(0.0))
     for d in ("along", "across"):
-        np.testing.assert_allclose(ds[f"mtf50_{d}"].values, quiet[f"mtf50_{d}"].values, rtol=0.05)
+        ratios = np.array([
+            add_sharpness(run_pass(cfg, (1, 16), seed).dataset, cfg)[f"mtf50_{d}"].values
+            / quiet[f"mtf50_{d}"].values
+            for seed in range(5)
+        ])  # (seeds, stages)
+        sem = ratios.std(axis=0, ddof=1) / np.sqrt(len(ratios))
+        assert np.all(np.abs(ratios.mean(axis=0) - 1.0) < 3.0 * sem + 0.03), (d, ratios)
+        assert np.all(np.abs(ratios - 1.0) < 0.2), (d, ratios)
     bright = _bench(0.0, irradiance_w_m2=150.0)  # stage 16 clips the bright ground, stage 1 does not
     clipped = add_sharpness(run_pass(bright, (1, 16), 3).dataset, bright)
     assert np.isfinite(clipped["mtf50_along"].sel(stage=1))

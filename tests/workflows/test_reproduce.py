@@ -41,10 +41,17 @@ KEYS = (
 
 @pytest.fixture(scope="module")
 def quick_runs(tmp_path_factory):
+    """Two runs of the same seed: ``a`` with the usable cores (the DR measurement and the
+    sharpness's companion pass beside the pass, figures on two threads), ``b`` on one thread
+    (``BENCH_SIM_THREADS=1``: every step in order), so their comparisons below also check that
+    the outputs do not depend on the overlap."""
     outs = []
-    for name in ("a", "b"):
+    for name, threads in (("a", None), ("b", "1")):
         out = tmp_path_factory.mktemp(name)
-        res = runner.invoke(app, ["reproduce", "--quick", "--seed", "7", "--out", str(out)])
+        with pytest.MonkeyPatch.context() as mp:
+            if threads is not None:
+                mp.setenv("BENCH_SIM_THREADS", threads)
+            res = runner.invoke(app, ["reproduce", "--quick", "--seed", "7", "--out", str(out)])
         assert res.exit_code == 0, res.output
         outs.append(out)
     return outs

@@ -16,7 +16,8 @@ from bench_sim.io import write_figure_png, write_png
 from bench_sim.rig.target_sources import area_resize
 
 __all__ = [
-    "stage_display", "fig3_stages", "fig4_hdr", "snr_versus_signal_figure", "Box", "import_in_background"
+    "stage_display", "fig3_stages", "fig4_hdr", "fig4_layout", "snr_versus_signal_figure", "Box",
+    "import_in_background",
 ]
 
 #: (line0, line1, col0, col1) of an inset, in output-image pixels
@@ -105,6 +106,38 @@ def fig3_stages(
     return write_png(path, rgb, meta)
 
 
+#: Fig. 4's width and margins [inches]: the heights follow the images' aspect (no empty bands)
+FIG4_WIDTH_IN, FIG4_MARGIN_IN, FIG4_GAP_IN, FIG4_TITLE_IN = 11.0, 0.11, 0.12, 0.32
+#: Largest height of a Fig. 4 inset [inches]
+FIG4_INSET_MAX_IN = 2.8
+
+
+def fig4_layout(image_shape: tuple[int, int], boxes: Sequence[Box]) -> tuple[tuple[float, float], list[Any]]:
+    """Fig. 4's size [inches] and its axes' rectangles (figure fractions): the two big panels
+    and the four insets (``boxes``: the dark box, then the bright box; two insets each). Each
+    rectangle has its image's aspect (heights capped), and the figure is as tall as its rows, so
+    that an image wider than tall (``--quick``) leaves no empty band above and below it."""
+    w_in, m, gap, title = FIG4_WIDTH_IN, FIG4_MARGIN_IN, FIG4_GAP_IN, FIG4_TITLE_IN
+    h, w = image_shape
+    big_w = (w_in - 2 * m - gap) / 2
+    big_h = min(max(big_w * h / max(w, 1), 1.0), 7.0)
+    slot_w = (w_in - 2 * m - 3 * gap) / 4
+    sizes = []  # (width, height) [in] of each inset: its box's aspect, at most the slot
+    for b in (boxes[0], boxes[0], boxes[1], boxes[1]):
+        aspect = max(b[1] - b[0], 1) / max(b[3] - b[2], 1)
+        ih = min(slot_w * aspect, FIG4_INSET_MAX_IN)
+        sizes.append((ih / aspect, ih))
+    row_h = max(ih for _, ih in sizes)
+    bottom = 0.25
+    height = m + title + big_h + title + row_h + bottom
+    y_big = bottom + row_h + title  # from the bottom [in]
+    rects = [[(m + k * (big_w + gap)) / w_in, y_big / height, big_w / w_in, big_h / height] for k in range(2)]
+    for k, (iw, ih) in enumerate(sizes):  # centred in its slot, top-aligned in the row
+        x = m + k * (slot_w + gap) + (slot_w - iw) / 2
+        rects.append([x / w_in, (bottom + row_h - ih) / height, iw / w_in, ih / height])
+    return (w_in, height), rects
+
+
 def fig4_hdr(
     hdr_display: np.ndarray,
     tra: np.ndarray,
@@ -119,21 +152,18 @@ def fig4_hdr(
 ) -> Path:
     """Fig. 4: (a) Gamma_HDR (linear display) and (b) Gamma_TRA side by side; below, insets of a
     dark region (Gamma1 vs Gamma_TRA) and of a bright region (Gamma2 vs Gamma_TRA). Inputs in
-    0..1. ``inset_titles``: the four inset captions (the caller states what was measured there);
-    default: which image each inset shows."""
+    0..1. ``inset_titles``: the four inset captions (the caller states what was measured inside
+    each box: :func:`bench_sim.workflows.reproduce.fig4_captions.pass_inset_captions`); default:
+    which image each inset shows. The figure's height follows the images (:func:`fig4_layout`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
-    fig = plt.figure(figsize=(11, 9.4), dpi=110)
-    # fixed margins (no layout engine: it costs more than drawing)
-    grid = fig.add_gridspec(
-        2, 4, height_ratios=[2.2, 1.0], left=0.01, right=0.99, top=0.965, bottom=0.035, wspace=0.08,
-        hspace=0.12,
-    )
-    big = [fig.add_subplot(grid[0, 0:2]), fig.add_subplot(grid[0, 2:4])]
+    size, rects = fig4_layout(hdr_display.shape, (dark_box, bright_box))
+    fig = plt.figure(figsize=size, dpi=110)  # fixed rectangles: no layout engine (it costs more)
+    big = [fig.add_axes(rects[0]), fig.add_axes(rects[1])]
     for ax, img, title in (
         (big[0], hdr_display, "(a) $\\Gamma_{HDR}$ (linear display)"),
         (big[1], tra, f"(b) $\\Gamma_{{TRA}}$ ({tra_name} transform)"),
@@ -163,18 +193,18 @@ def fig4_hdr(
         (tra, bright_box, "tab:orange", titles[3]),
     ]
     for k, (img, box, colour, title) in enumerate(insets):
-        ax = fig.add_subplot(grid[1, k])
+        ax = fig.add_axes(rects[2 + k])
         l0, l1, c0, c1 = box
         crop = img[l0:l1, c0:c1]
         lo, hi = float(np.percentile(crop, 0.5)), float(np.percentile(crop, 99.5))
         ax.imshow(crop, cmap="gray", vmin=lo, vmax=max(hi, lo + 1e-6), interpolation="nearest")
-        ax.set_title(title, fontsize=9, color=colour)
+        ax.set_title(title, fontsize=8, color=colour)
         ax.set_xticks([])
         ax.set_yticks([])
         for s in ax.spines.values():
             s.set_edgecolor(colour)
             s.set_linewidth(2)
-    fig.text(0.5, 0.008, "insets stretched to their own 0.5-99.5 % range", ha="center", fontsize=8)
+    fig.text(0.5, 0.06 / size[1], "insets stretched to their own 0.5-99.5 % range", ha="center", fontsize=8)
     return _save(path, fig, meta)
 
 

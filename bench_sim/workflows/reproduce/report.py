@@ -18,6 +18,7 @@ from bench_sim.io import atomic_path, markdown_table, write_text
 from bench_sim.workflows.reproduce.result import PAPER, ReproduceResult
 from bench_sim.workflows.reproduce.seeds import spread_section
 from bench_sim.workflows.reproduce.truth_report import clipped_source_sentence, truth_section
+from bench_sim.workflows.reproduce.wording import SPATIAL, TEMPORAL, pct, read_noise_limit_note
 
 __all__ = ["write_report", "report_markdown", "write_table1", "AGREE_DB", "better_input"]
 
@@ -98,10 +99,7 @@ def _dr_gains(r: ReproduceResult) -> list[str]:
         f"(sensor model: {model_g:.2f} dB; DR {_NAMES['gamma1']} {d.dr_db['gamma1']:.2f} dB, "
         f"{_NAMES['gamma2']} {d.dr_db['gamma2']:.2f} dB). "
         + ("" if better == "gamma1" else f"Gain over Gamma1: {d.delta_dr_db_vs_gamma1:.2f} dB. ")
-        + f"Gamma_HDR keeps Gamma1's saturation end and takes the dark end from stage {mu2}; each row "
-        f"is read and digitised on its own, so read noise adds up as sqrt(m) in the digital sum and "
-        f"the noise floor drops by about sqrt({mu2}/{mu1}), i.e. about 10 lg({mu2}/{mu1}) = "
-        f"{10 * math.log10(mu2 / mu1):.2f} dB, not 20 lg.",
+        + _ends_sentence(r),
     ]
     if d.gain_over_gamma2_by_construction:
         lines.append(
@@ -123,6 +121,41 @@ def _dr_gains(r: ReproduceResult) -> list[str]:
     return lines
 
 
+def _ends_sentence(r: ReproduceResult) -> str:
+    """Where Gamma_HDR's saturation point and SNR = 1 point lie against its inputs' (measured
+    through the chain), and the noise floor's drop against the read-noise limit (a temporal
+    SNR gain: the ratio of the SNR = 1 points)."""
+    mu1, mu2 = r.shape.mu1, r.shape.mu2
+    img = r.dynamic_range.dr_details.get("images", {})
+    try:
+        sat = {k: float(img[k]["photons_sat"]) for k in _NAMES}
+        low = {k: float(img[k]["photons_min"]) for k in _NAMES}
+    except (KeyError, TypeError):
+        return ""
+    if not all(math.isfinite(v) and v > 0 for v in (*sat.values(), *low.values())):
+        return ""
+
+    def same(a: float, b: float) -> bool:
+        return _agrees(20 * math.log10(a), 20 * math.log10(b))
+
+    drop_db = 20 * math.log10(low["gamma1"] / low["gamma_hdr"])
+    limit_db = 10 * math.log10(mu2 / mu1)
+    return (
+        f"Gamma_HDR saturates at {sat['gamma_hdr']:.4g} photons per pixel per frame ("
+        + ("Gamma1's saturation end" if same(sat["gamma_hdr"], sat["gamma1"])
+           else f"not Gamma1's {sat['gamma1']:.4g}")
+        + f") and reaches SNR = 1 at {low['gamma_hdr']:.4g} ("
+        + (f"stage {mu2}'s dark end" if same(low["gamma_hdr"], low["gamma2"])
+           else f"not stage {mu2}'s {low['gamma2']:.4g}")
+        + f"); its noise floor lies {abs(drop_db):.2f} dB {'below' if drop_db >= 0 else 'above'} "
+        f"Gamma1's ({low['gamma1']:.4g}), a "
+        f"{TEMPORAL} gain of {low['gamma1'] / low['gamma_hdr']:.2f} at the noise floor. Each row is "
+        f"read and digitised on its own, so read noise adds up as sqrt(m) in the digital sum: the "
+        f"read-noise limit of that {TEMPORAL} gain is sqrt({mu2}/{mu1}) = {math.sqrt(mu2 / mu1):.2f}, "
+        f"i.e. 10 lg({mu2}/{mu1}) = {limit_db:.2f} dB, not 20 lg."
+    )
+
+
 def _dr_section(r: ReproduceResult) -> list[str]:
     """The headline: DRs, the gain over Gamma1 first, then over Gamma2 and what it means."""
     lines = _dr_table(r) + _dr_gains(r)
@@ -130,7 +163,8 @@ def _dr_section(r: ReproduceResult) -> list[str]:
     if math.isfinite(sw["snr_below"]) and math.isfinite(sw["snr_above"]):
         lines.append(
             f"- At the fusion switch (Gamma_HDR = {sw['threshold_dn']:.0f} DN in stage-{r.shape.mu2} "
-            f"units, about {sw['photons']:.4g} photons per pixel per frame) the SNR of Gamma_HDR drops "
+            f"units, about {sw['photons']:.4g} photons per pixel per frame) the {TEMPORAL} of Gamma_HDR "
+            f"{'drops' if sw['snr_above'] < sw['snr_below'] else 'rises'} "
             f"from {sw['snr_below']:.1f} (Gamma2, at {sw['photons_below']:.4g} photons) to "
             f"{sw['snr_above']:.1f} (scaled Gamma1, at {sw['photons_above']:.4g} photons): see the "
             "figure."
@@ -172,7 +206,7 @@ def _eq18_inconsistency(r: ReproduceResult) -> str:
     ranking = " > ".join(_NAMES[k] for k in sorted(dr, key=dr.__getitem__, reverse=True))
     sat2 = r.scene.saturated_fraction["gamma2"]
     pile = (
-        f"whose {sat2:.0%} saturated pixels pile into its top bin"
+        f"whose {pct(sat2, 0)} saturated pixels pile into its top bin"
         if sat2 > 0
         else "which has no saturated pixels"
     )
@@ -204,7 +238,7 @@ def _pedestal_note(r: ReproduceResult) -> str:
             "no pixel of the darkest patch is stored as 0 DN in Gamma1 or Gamma2, so the word does not "
             "clip the dark noise and the dark statistics are unbiased."
             if zeros == 0
-            else f"{zeros:.1%} of the darkest patch's pixels are still stored as 0 DN: the word clips "
+            else f"{pct(zeros)} of the darkest patch's pixels are still stored as 0 DN: the word clips "
             "the dark noise there and its statistics are biased (raise `dtdi.pedestal_dn`)."
         )
     )
@@ -237,46 +271,91 @@ def _fig3_section(r: ReproduceResult) -> list[str]:
         "",
         f"Paper: the image brightens with the stage m; small m leaves the dark parts dark, large m "
         f"saturates the bright parts. Simulation: stages {', '.join(str(k) for k in r.shape.fig3_stages)} "
-        f"of one DTDI pass over the same frames; Gamma2 (m = {r.shape.mu2}) clips "
-        f"{sat['gamma2']:.1%} of its pixels, Gamma1 (m = {r.shape.mu1}) "
-        f"{sat['gamma1']:.1%}.",
+        f"of one DTDI pass over the same frames; Gamma2 (m = {r.shape.mu2}) stores "
+        f"{pct(sat['gamma2'])} of its pixels at the top of the {r.shape.beta}-bit word, Gamma1 "
+        f"(m = {r.shape.mu1}) {pct(sat['gamma1'])}.",
         "",
     ]
+
+
+def _fig4_rows(r: ReproduceResult) -> list[list[str]]:
+    """The qualitative claims with what was measured: spatial SNRs over the wedge steps (mean /
+    standard deviation over the patch), labelled as such; the read-noise limit, which bounds a
+    temporal SNR gain, beside them for reference only."""
+    mu1, mu2 = r.shape.mu1, r.shape.mu2
+    q, dark, bright = r.scene.qualitative, r.scene.darkest_patch, r.scene.brightest_patch
+    snr = dark["snr"]
+    temporal = dark.get("temporal_snr")  # from the truth, where the run measured it
+    t_gain = (
+        f"; {TEMPORAL} {temporal['gamma_hdr']:.2f} (x{temporal['gamma_hdr'] / temporal['gamma1']:.2f} "
+        f"over Gamma1's, read-noise limit sqrt({mu2}/{mu1}) = {(mu2 / mu1) ** 0.5:.2f})"
+        if isinstance(temporal, dict) and temporal.get("gamma1") and temporal.get("gamma_hdr") else ""
+    )
+    b_name = f"the {bright['reflectance']:.0%} patch"
+    kept, why_not = _bright_kept(r)
+    return [
+        [f"stage {mu2} saturates the brightly lit region",
+         f"{pct(bright['gamma2_saturated_fraction'])} of {b_name} at the word's top (the brightest wedge "
+         "step as lit)",
+         _yes(q["stage_mu2_saturates_bright_region"])],
+        [f"stage {mu1} leaves the darkest patches in the noise ({SPATIAL} < 2)",
+         f"{SPATIAL} {snr['gamma1']:.2f} on the {dark['reflectance']:.0%} patch (the darkest wedge "
+         "step as lit)",
+         _yes(q["stage_mu1_leaves_darkest_patch_in_noise"])],
+        ["Gamma_HDR keeps the bright detail",
+         f"{pct(bright['gamma_hdr_saturated_fraction'])} at the word's top, "
+         f"{pct(bright.get('gamma_hdr_from_clipped_gamma2_fraction', 0.0))} from a Gamma2 at the "
+         f"word's top ({b_name}, the brightest wedge step as lit); stage {mu1} at "
+         f"{pct(bright['gamma1_fraction_of_phi_fs'], 0)} of Phi_FS there{why_not}",
+         _yes(kept)],
+        [f"Gamma_HDR lifts the dark detail ({SPATIAL} >= 3 and >= 1.8 x Gamma1's)",
+         f"{SPATIAL} {snr['gamma_hdr']:.2f} (x{snr['gamma_hdr'] / max(snr['gamma1'], 1e-9):.2f} over "
+         f"Gamma1's; {read_noise_limit_note(mu1, mu2)}){t_gain}",
+         _yes(q["hdr_lifts_darkest_patch"])],
+    ]
+
+
+def _clipped_anywhere(r: ReproduceResult) -> str:
+    """The fractions clipped anywhere (pixel, ADC or word) by the truth's clip flags, where the
+    run gives them (a stage may clip on its pixels below the word's top)."""
+    c = r.scene.clipped_fraction
+    if not c:
+        return ""
+    return (
+        " Clipped anywhere (pixel, ADC or word; the truth's clip flags): "
+        + ", ".join(f"{_NAMES[k]} {pct(c[k])}" for k in _NAMES if k in c) + "."
+    )
+
+
+def _bright_kept(r: ReproduceResult) -> tuple[bool, str]:
+    """Whether Gamma_HDR keeps the brightest patch: none of its pixels at the word's top or from a
+    clipped Gamma2, and (with the truth) not more than half of them clipped on the pixels
+    (the pass then clears the patch's SNR); the words saying why not."""
+    bright = r.scene.brightest_patch
+    kept = bool(r.scene.qualitative["hdr_keeps_bright_unsaturated"])
+    if r.truth is not None and bright["snr"].get("gamma_hdr") is None:
+        return False, (
+            f"; by the truth's clip flags at least half of Gamma_HDR's pixels there are clipped (stage "
+            f"{r.shape.mu1} clips on "
+            f"{_clip_cause(r.dynamic_range.stage_clips_on_word['gamma1'], r.shape.beta)})"
+        )
+    return kept, ""
 
 
 def _fig4_section(r: ReproduceResult, tra: str) -> list[str]:
     """Fig. 4 and the paper's qualitative claims, each with what was measured."""
     mu1, mu2 = r.shape.mu1, r.shape.mu2
-    q, dark, bright = r.scene.qualitative, r.scene.darkest_patch, r.scene.brightest_patch
     return [
         f"## Fig. 4 - Gamma_HDR (mu1 = {mu1}, mu2 = {mu2}, eq. 11) and Gamma_TRA ({tra})",
         "",
         "![Fig. 4](fig4_hdr.png)",
         "",
-        *markdown_table(["qualitative result (paper, sec. 3)", "measured", "holds"], [
-            [f"stage {mu2} saturates the brightly lit region",
-             f"{bright['gamma2_saturated_fraction']:.1%} of the {bright['reflectance']:.0%} patch under the "
-             "spot clipped",
-             _yes(q["stage_mu2_saturates_bright_region"])],
-            [f"stage {mu1} leaves the darkest patches in the noise (SNR < 2)",
-             f"SNR {dark['snr']['gamma1']:.2f} on the {dark['reflectance']:.0%} patch under the fill",
-             _yes(q["stage_mu1_leaves_darkest_patch_in_noise"])],
-            ["Gamma_HDR keeps the bright detail",
-             f"{bright['gamma_hdr_saturated_fraction']:.1%} clipped, "
-             f"{bright.get('gamma_hdr_from_clipped_gamma2_fraction', 0.0):.1%} from a clipped Gamma2 "
-             f"(the {bright['reflectance']:.0%} patch); stage {mu1} at "
-             f"{bright['gamma1_fraction_of_phi_fs']:.0%} of Phi_FS there",
-             _yes(q["hdr_keeps_bright_unsaturated"])],
-            ["Gamma_HDR lifts the dark detail (SNR >= 3 and >= 1.8 x Gamma1)",
-             f"SNR {dark['snr']['gamma_hdr']:.2f} "
-             f"(x{dark['snr']['gamma_hdr'] / max(dark['snr']['gamma1'], 1e-9):.2f} over Gamma1; "
-             f"read-noise limit sqrt({mu2}/{mu1}) = {(mu2 / mu1) ** 0.5:.2f})",
-             _yes(q["hdr_lifts_darkest_patch"])],
-        ]),
+        *markdown_table(["qualitative result (paper, sec. 3)", "measured", "holds"], _fig4_rows(r)),
         "",
-        "Saturated pixels: "
-        + ", ".join(f"{_NAMES[k]} {v:.1%}" for k, v in r.scene.saturated_fraction.items())
-        + " (Gamma_HDR: where Gamma1 itself clips)."
+        f"Pixels at the top of the {r.shape.beta}-bit word: "
+        + ", ".join(f"{_NAMES[k]} {pct(v)}" for k, v in r.scene.saturated_fraction.items())
+        + " (Gamma_HDR: where Gamma1 is at the word's top)."
+        + _clipped_anywhere(r)
         + (" " + clipped_source_sentence(r.truth.fusion_truth, mu2) if r.truth is not None else ""),
         "",
     ]

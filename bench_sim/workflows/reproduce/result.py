@@ -9,7 +9,7 @@ sections' fields in this order. The three images are keyed ``gamma1``, ``gamma2`
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import MISSING, asdict, dataclass, fields
 from typing import Any
 
 from bench_sim.measure.chain_dr import ChainDR
@@ -141,12 +141,15 @@ class Table1Result:
 @dataclass(frozen=True)
 class SceneResult:
     """The scene-referred metrics of the pass (:class:`~bench_sim.measure.pass_metrics.PassMetrics`):
-    saturated fractions, the darkest and brightest wedge patches, the paper's qualitative claims."""
+    saturated fractions (at the word's top), the darkest and brightest wedge patches, the paper's
+    qualitative claims and, where the run had the truth, the fraction of each image's pixels
+    clipped anywhere (pixel, ADC or word: the truth's clip flags; ``None`` where not given)."""
 
     saturated_fraction: dict[str, float]
     darkest_patch: dict[str, Any]
     brightest_patch: dict[str, Any]
     qualitative: dict[str, bool]
+    clipped_fraction: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -214,3 +217,21 @@ class ReproduceResult:
         for part in parts:
             out.update(asdict(part))
         return out
+
+    @classmethod
+    def from_dict(cls, metrics: dict[str, Any]) -> ReproduceResult:
+        """The result back from :meth:`to_dict`'s dict (``metrics.json``); the optional sections
+        (timings, truth, seeds) are ``None`` where their fields are absent."""
+
+        def section(kind: Any) -> Any:
+            names = [f.name for f in fields(kind)]
+            required = [f.name for f in fields(kind) if f.default is MISSING]
+            if not all(n in metrics for n in required):
+                return None
+            return kind(**{n: metrics[n] for n in names if n in metrics})
+
+        return cls(
+            shape=section(RunShape), dynamic_range=section(DynamicRangeResult),
+            table1=section(Table1Result), scene=section(SceneResult), record=section(RunRecord),
+            timings=section(RunTimings), truth=section(TruthResult), seeds=section(SeedsResult),
+        )

@@ -13,13 +13,24 @@ photon-transfer series through the chain), ``gamma_hdr_error.png`` and ``tdi_lig
 ``mtf50_vs_stage.png`` and ``.csv`` (MTF50 along and across the track per stage, from a
 companion pass with slanted edges:
 :mod:`bench_sim.workflows.reproduce.stage_mtf`). Every file carries the config, seed and version.
+
+Two threads: while the pass runs, a :class:`~bench_sim.runtime.parallel.Lane` beside it measures
+the whole-chain DR and runs the sharpness's companion pass (both on their own random streams,
+so the numbers are those of the steps in order); after it, the lane draws some figures while
+the pass's metrics are computed (:mod:`bench_sim.workflows.reproduce.writing`). With
+``BENCH_SIM_THREADS=1`` every step runs in order, with the same files.
 """
 
 from __future__ import annotations
 
+import contextlib
+import copy
+import functools
 import math
+import threading
 import time
-from dataclasses import replace
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +41,7 @@ from bench_sim.errors import BenchSimError
 from bench_sim.fusion.common import FusionResult
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.fusion.tonemap import quantize_display, tone_map
-from bench_sim.io import output_set, write_exr, write_json, write_png, write_tiff16
+from bench_sim.io import output_set, write_json
 from bench_sim.measure.chain_dr import ChainDR, measure_chain_dynamic_range
 from bench_sim.measure.fusion_scores import fusion_scores
 from bench_sim.measure.pass_metrics import PassMetrics, pass_metrics, patch_slices
@@ -39,7 +50,7 @@ from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for
 from bench_sim.pipeline import PassResult, run_pass
 from bench_sim.rig.geometry import rig_geometry
 from bench_sim.rig.target import make_panel
-from bench_sim.runtime.parallel import start
+from bench_sim.runtime.parallel import Lane
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.runtime.provenance import provenance, render_provenance
 from bench_sim.sensor.model import (
@@ -51,14 +62,8 @@ from bench_sim.sensor.model import (
 )
 from bench_sim.workflows.estimates import estimate_reproduce
 from bench_sim.workflows.preflight import check_seed, preflight
-from bench_sim.workflows.reproduce.figures import (
-    Box,
-    fig3_stages,
-    fig4_hdr,
-    import_in_background,
-    snr_versus_signal_figure,
-    stage_display,
-)
+from bench_sim.workflows.reproduce import writing
+from bench_sim.workflows.reproduce.figures import Box, import_in_background
 from bench_sim.workflows.reproduce.report import write_report, write_table1
 from bench_sim.workflows.reproduce.result import (
     PAPER,
@@ -75,6 +80,7 @@ from bench_sim.workflows.reproduce.result import (
 from bench_sim.workflows.reproduce.seeds import headline_numbers, seed_spread
 from bench_sim.workflows.reproduce.stage_mtf import measure_stage_mtf, write_stage_mtf
 from bench_sim.workflows.reproduce.truth_figures import write_truth_figures
+from bench_sim.workflows.reproduce.writing import snr_figure, start_image_files
 
 __all__ = [
     "run_reproduce", "check_reproducible", "quick_config", "PAPER", "FIG3_STAGES", "QUICK_OVERRIDES"
@@ -88,13 +94,29 @@ CHAIN_DR_COLUMNS = 64
 QUICK_DR_LEVELS = 24
 #: Bits of the stage images' TIFF files.
 TIFF_BITS = 16
+#: The steps of ``metrics.json``'s ``timings_s``, in this order (``metrics`` and ``sharpness``
+#: partly run beside the pass: busy seconds)
+TIMED_STEPS = ("render_setup", "render_frames", "sensor_dtdi", "pass_wall", "fusion", "metrics", "sharpness",
+               "write")
 
 class _Timer:
-    def __init__(self) -> None:
-        self.steps: dict[str, float] = {}
+    """Seconds per step, added up from any thread (the lane's steps are busy times)."""
+
+    def __init__(self, steps: tuple[str, ...] = ()) -> None:
+        self.steps: dict[str, float] = dict.fromkeys(steps, 0.0)  # this order, whoever ends first
+        self._lock = threading.Lock()
 
     def add(self, name: str, seconds: float) -> None:
-        self.steps[name] = self.steps.get(name, 0.0) + seconds
+        with self._lock:
+            self.steps[name] = self.steps.get(name, 0.0) + seconds
+
+    @contextlib.contextmanager
+    def timed(self, name: str) -> Iterator[None]:
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.add(name, time.perf_counter() - t0)
 
 
 def _box(panel: Any, cfg: BenchConfig, name: str, half: str, lines: int) -> tuple[int, int, int, int]:
@@ -188,12 +210,75 @@ def _stages(cfg: BenchConfig) -> tuple[list[int], tuple[int, ...]]:
     return sorted(set(fig3) | {mu1, mu2}), fig3
 
 
-def _pass_with_progress(cfg: BenchConfig, stages: list[int], rng: np.random.Generator) -> PassResult:
+def _pass_with_progress(
+    cfg: BenchConfig, stages: list[int], rng: np.random.Generator, on_first: Callable[[], None] | None = None
+) -> PassResult:
     """Render every frame of the pass and stream it through the sensor and DTDI (one simulate
-    pass), with a progress bar over the frames."""
+    pass), with a progress bar over the frames; ``on_first()`` at its first frames."""
     frames = cfg.lines + max(stages) - 1
     with progress_bar("render + sensor + DTDI", frames, "frames") as bar:
-        return run_pass(cfg, stages, rng, truth=True, on_frames=bar.advance)
+        first = [on_first]
+
+        def advance(n: int) -> None:
+            call, first[0] = first[0], None
+            if call is not None:
+                call()
+            bar.advance(n)
+
+        return run_pass(cfg, stages, rng, truth=True, on_frames=advance)
+
+
+@dataclass
+class _Beside:
+    """The steps queued on the lane beside the pass: the waits for their results."""
+
+    chain: Callable[[], ChainDR]
+    stage_mtf: Callable[[], Any]
+
+
+def _chain_dr(cfg: BenchConfig, rng: np.random.Generator, quick: bool) -> ChainDR:
+    """The whole-chain DR measurement (photon-transfer series), drawing from ``rng``."""
+    levels: dict[str, Any] = {"n_levels": QUICK_DR_LEVELS} if quick else {}
+    return measure_chain_dynamic_range(cfg, rng, columns=min(CHAIN_DR_COLUMNS, cfg.sensor.columns), **levels)
+
+
+def _pass_and_beside(
+    cfg: BenchConfig, stages: list[int], rng: np.random.Generator, seed: int, quick: bool, lane: Lane,
+    timer: _Timer,
+) -> tuple[PassResult, _Beside]:
+    """The pass and, on ``lane`` beside it, the whole-chain DR measurement and the companion pass
+    of the sharpness (:func:`measure_stage_mtf`, its own stream).
+
+    The DR measurement draws from ``rng`` where the pass stopped drawing: the pass draws all it
+    draws (render seed, fixed pattern, noise seed) before its first frames, so the measurement
+    starts then, from a copy of the generator. Should the generator have moved on after that
+    (a pass that draws later), the copy is dropped and the measurement runs after the pass from
+    ``rng`` itself: the numbers never depend on the overlap. The companion pass renders its own
+    records with Mitsuba, so it starts once the pass's renders are done (the fast engine's
+    frames are numpy), or after the pass with the reference engine."""
+    queued: dict[str, Any] = {}
+
+    def chain(gen: np.random.Generator) -> ChainDR:
+        with timer.timed("metrics"):
+            return _chain_dr(cfg, gen, quick)
+
+    def stage_mtf() -> Any:
+        with timer.timed("sharpness"):
+            return measure_stage_mtf(cfg, seed)
+
+    def on_first() -> None:
+        queued["state"] = rng.bit_generator.state
+        queued["chain"] = lane.submit(functools.partial(chain, copy.deepcopy(rng)))
+        if cfg.render.engine == "fast":
+            queued["mtf"] = lane.submit(stage_mtf)
+        lane.submit(writing.warm_up)
+
+    sim = _pass_with_progress(cfg, stages, rng, on_first if lane.parallel else None)
+    if queued.get("state") != rng.bit_generator.state:
+        queued["chain"] = lane.submit(functools.partial(chain, rng))
+    if "mtf" not in queued:
+        queued["mtf"] = lane.submit(stage_mtf)
+    return sim, _Beside(queued["chain"], queued["mtf"])
 
 
 def _fuse(cfg: BenchConfig, sim: PassResult) -> tuple[FusionResult, np.ndarray]:
@@ -221,7 +306,8 @@ def _shape(cfg: BenchConfig, stages: list[int], fig3: tuple[int, ...]) -> RunSha
 def _scene(pm: PassMetrics) -> SceneResult:
     if pm.darkest_patch is None or pm.brightest_patch is None or pm.qualitative is None:
         raise BenchSimError(f"reproduce: {pm.no_patches}")  # check_reproducible rules it out
-    return SceneResult(pm.saturated_fraction, pm.darkest_patch, pm.brightest_patch, pm.qualitative)
+    return SceneResult(pm.saturated_fraction, pm.darkest_patch, pm.brightest_patch, pm.qualitative,
+                       clipped_fraction=pm.clipped_fraction)
 
 
 def _result(
@@ -259,54 +345,76 @@ def run_reproduce(
     check_reproducible(cfg)
     out = preflight(cfg, out=out, estimate=estimate_reproduce(cfg, stages))
     t_start = time.perf_counter()
-    timer = _Timer()
+    timer = _Timer(TIMED_STEPS)
     import_in_background()  # ready when the figures are drawn
     rng = np.random.default_rng(seed)
-    # 1-2. render + sensor + DTDI (one simulate pass; the generator goes on to the DR measurement)
-    sim = _pass_with_progress(cfg, stages, rng)
-    for step in ("render_setup", "render_frames", "sensor_dtdi", "pass_wall"):
-        timer.add(step, sim.timings_s[step])
-    # 3. fusion and display transform
-    t0 = time.perf_counter()
-    fused, tra8 = _fuse(cfg, sim)
-    timer.add("fusion", time.perf_counter() - t0)
-    # 4. metrics
-    t0 = time.perf_counter()
-    levels: dict[str, Any] = {"n_levels": QUICK_DR_LEVELS} if quick else {}
-    chain = measure_chain_dynamic_range(cfg, rng, columns=min(CHAIN_DR_COLUMNS, cfg.sensor.columns), **levels)
-    pm = pass_metrics(cfg, sim, fused)
-    scores = fusion_scores(cfg, sim, fused)  # Gamma_HDR against its exact truth, eq. 11 and clip-aware
-    timer.add("metrics", time.perf_counter() - t0)
-    # 4b. sharpness per stage: a companion pass with slanted edges (the paper target has none)
-    t0 = time.perf_counter()
-    stage_mtf = measure_stage_mtf(cfg, seed)
-    timer.add("sharpness", time.perf_counter() - t0)
-    # 5. outputs
-    t0 = time.perf_counter()
-    setup = sim.setup
-    meta = provenance(cfg, seed, quick=quick, render=render_provenance(setup.info),
-                      backend=setup.backend.as_dict())
-    result = replace(_result(cfg, stages, fig3, sim, chain, pm, meta), truth=TruthResult(scores.summary))
-    if seeds > 1:
-        result = replace(result, seeds=_over_seeds(cfg, stages, fig3, seed, seeds, quick, result))
-    record = {"command": "reproduce", "quick": quick, "version": meta["version"], "seed": int(seed),
-              "config_sha256": meta["config_sha256"]}
-    with output_set(out, record) as tmp:  # the files as one set: all of them or none
-        _write_outputs(tmp, cfg, result, meta, sim.stage_dn, fused, tra8, setup.grid.panel)
-        _snr_figure(tmp / "snr_vs_signal.png", chain, meta)
-        write_stage_mtf(stage_mtf, cfg, tmp, meta)
-        write_truth_figures(scores, tmp, meta)
-        timer.add("write", time.perf_counter() - t0)
-        # like the timings, a fact of this process (fewer renders when it had the records cached)
-        result = replace(result, timings=RunTimings(
-            {k: round(v, 3) for k, v in timer.steps.items()}, round(time.perf_counter() - t_start, 3),
-            int(setup.info["mitsuba_renders"]),
-        ))
-        metrics = result.to_dict()
-        write_json(tmp / "metrics.json", metrics)
-        write_report(tmp / "report.md", result, cfg, quick)
+    with Lane() as lane:
+        # 1-2. render + sensor + DTDI (one simulate pass); beside it the whole-chain DR (the
+        # generator goes on there) and the sharpness per stage (a companion pass with slanted edges)
+        sim, beside = _pass_and_beside(cfg, stages, rng, seed, quick, lane, timer)
+        for step in ("render_setup", "render_frames", "sensor_dtdi", "pass_wall"):
+            timer.add(step, sim.timings_s[step])
+        # 3. fusion and display transform
+        with timer.timed("fusion"):
+            fused, tra8 = _fuse(cfg, sim)
+        setup = sim.setup
+        meta = provenance(cfg, seed, quick=quick, render=render_provenance(setup.info),
+                          backend=setup.backend.as_dict())
+        record = {"command": "reproduce", "quick": quick, "version": meta["version"], "seed": int(seed),
+                  "config_sha256": meta["config_sha256"]}
+        with output_set(out, record) as tmp:  # the files as one set: all of them or none
+            try:
+                result = _outputs(tmp, cfg, (stages, fig3), sim, fused, tra8, beside, lane, meta, timer)
+            except BaseException:
+                lane.cancel()  # no step of the lane goes on writing into the folder removed now
+                raise
+            if seeds > 1:
+                result = replace(result, seeds=_over_seeds(cfg, stages, fig3, seed, seeds, quick, result))
+            # like the timings, a fact of this process (fewer renders when it had the records cached)
+            result = replace(result, timings=RunTimings(
+                {k: round(v, 3) for k, v in timer.steps.items()}, round(time.perf_counter() - t_start, 3),
+                int(setup.info["mitsuba_renders"]),
+            ))
+            metrics = result.to_dict()
+            write_json(tmp / "metrics.json", metrics)
+            write_report(tmp / "report.md", result, cfg, quick)
     _print_timings(result.timings, out)
     return metrics
+
+
+def _outputs(
+    tmp: Path, cfg: BenchConfig, stage_sets: tuple[list[int], tuple[int, ...]], sim: PassResult,
+    fused: FusionResult, tra8: np.ndarray, beside: _Beside, lane: Lane, meta: dict[str, Any], timer: _Timer,
+) -> ReproduceResult:
+    """The metrics of the pass and the files into ``tmp``: the image files on the pool; the SNR
+    and sharpness figures (after the lane's measurements) and Fig. 3 on ``lane`` while the pass's
+    metrics are computed here, then Fig. 4 and the truth figures. Returns the result (less
+    timings and seeds)."""
+    stages, fig3 = stage_sets
+    t0 = time.perf_counter()
+    files_written = start_image_files(tmp, cfg, meta, sim.stage_dn, fused, tra8)
+    lane.submit(lambda: snr_figure(tmp / "snr_vs_signal.png", beside.chain(), meta))
+    lane.submit(lambda: _stage_mtf_files(beside, cfg, tmp, meta))
+    lane.submit(lambda: writing.fig3(tmp / "fig3_stages.png", sim.stage_dn, fig3, cfg.dtdi.beta_bits, meta))
+    with timer.timed("metrics"):
+        pm = pass_metrics(cfg, sim, fused)
+        scores = fusion_scores(cfg, sim, fused)  # Gamma_HDR against its exact truth, eq. 11 and clip-aware
+    writing.fig4(tmp / "fig4_hdr.png", cfg, _inset_boxes(sim.setup.grid.panel, cfg, cfg.lines), meta,
+                 sim.stage_dn, fused, tra8, sim.setup.grid.panel, sim.setup.geom)
+    writing.drawn(lambda: write_truth_figures(scores, tmp, meta))
+    result = _result(cfg, stages, fig3, sim, beside.chain(), pm, meta)
+    result = replace(result, truth=TruthResult(scores.summary))
+    write_table1(tmp / "table1.csv", result)
+    files_written()
+    lane.join()
+    timer.add("write", time.perf_counter() - t0)
+    return result
+
+
+def _stage_mtf_files(beside: _Beside, cfg: BenchConfig, folder: Path, meta: dict[str, Any]) -> None:
+    """``mtf50_vs_stage.csv`` and ``.png`` of the companion pass (:func:`write_stage_mtf`)."""
+    ds = beside.stage_mtf()
+    writing.drawn(lambda: write_stage_mtf(ds, cfg, folder, meta))
 
 
 def _over_seeds(
@@ -338,78 +446,3 @@ def _print_timings(timings: RunTimings | None, out: Path) -> None:
     for step, s in timings.timings_s.items():
         print(f"  {step:<12} {s:8.2f} s")
     print(f"  {'total':<12} {timings.wall_s:8.2f} s  -> {out}")
-
-
-def _snr_figure(path: Path, chain: ChainDR, meta: dict[str, Any]) -> None:
-    names = {"gamma1": f"$\\Gamma_1$ (m = {chain.mu1})", "gamma2": f"$\\Gamma_2$ (m = {chain.mu2})",
-             "gamma_hdr": "$\\Gamma_{HDR}$ (eq. 11)"}
-    img = chain.images
-    snr_versus_signal_figure(
-        chain.photons,
-        {k: v.snr for k, v in img.items()},
-        {k: v.photons_min for k, v in img.items()},
-        {k: v.photons_sat for k, v in img.items()},
-        chain.fusion_switch()["photons"],
-        path,
-        dict(meta, figure="SNR versus signal of Gamma1, Gamma2 and Gamma_HDR (photon-transfer series)"),
-        {k: f"{names[k]}: DR {v.dr_db:.1f} dB" for k, v in img.items()},
-    )
-
-
-def _start_image_files(
-    out: Path, cfg: BenchConfig, meta: dict[str, Any], stage_images: dict[int, np.ndarray],
-    fused: FusionResult, tra8: np.ndarray,
-) -> Any:
-    """Start writing the image files on the thread pool; returns the wait for them."""
-    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    g1, g2 = stage_images[mu1], stage_images[mu2]
-    return start([
-        lambda: write_tiff16(out / "gamma1.tiff", g1, dict(meta, image=f"Gamma1, stage {mu1} [DN]")),
-        lambda: write_tiff16(out / "gamma2.tiff", g2, dict(meta, image=f"Gamma2, stage {mu2} [DN]")),
-        lambda: write_exr(
-            out / "gamma_hdr.exr",
-            {"Y": fused.hdr, "source": fused.source.astype(np.float32)},
-            dict(meta, image=f"Gamma_HDR (eq. 11) [DN, stage-{mu2} units]; source = stage used"),
-        ),
-        lambda: write_png(out / "gamma_tra.png", tra8, dict(meta, image=f"Gamma_TRA ({cfg.fusion.tra})")),
-    ])
-
-
-def _fig4(
-    out: Path, cfg: BenchConfig, result: ReproduceResult, meta: dict[str, Any],
-    stage_images: dict[int, np.ndarray], fused: FusionResult, tra8: np.ndarray, panel: Any,
-) -> None:
-    """Fig. 4 with its insets, captioned with what was measured there."""
-    mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
-    dark_box, bright_box = _inset_boxes(panel, cfg, cfg.lines)
-    dark, bright = result.scene.darkest_patch, result.scene.brightest_patch
-    fig4_hdr(
-        np.clip(fused.hdr.astype(np.float32) / np.float32(fused.full_scale_dn), 0, 1),
-        tra8 / np.float32(255.0),
-        stage_display(stage_images[mu1], beta),
-        stage_display(stage_images[mu2], beta),
-        dark_box,
-        bright_box,
-        out / "fig4_hdr.png",
-        meta,
-        cfg.fusion.tra,
-        inset_titles=(
-            f"dark, $\\Gamma_1$: darkest step SNR {dark['snr']['gamma1']:.1f}",
-            f"dark, $\\Gamma_{{TRA}}$: darkest step, HDR SNR {dark['snr']['gamma_hdr']:.1f}",
-            f"bright, $\\Gamma_2$: {bright['gamma2_saturated_fraction']:.0%} clipped",
-            f"bright, $\\Gamma_{{TRA}}$: {bright['gamma_hdr_saturated_fraction']:.0%} clipped",
-        ),
-    )
-
-
-def _write_outputs(
-    out: Path, cfg: BenchConfig, result: ReproduceResult, meta: dict[str, Any],
-    stage_images: dict[int, np.ndarray], fused: FusionResult, tra8: np.ndarray, panel: Any,
-) -> None:
-    """The images (on the thread pool), Fig. 3, Fig. 4 (drawn here meanwhile) and ``table1.csv``."""
-    files_written = _start_image_files(out, cfg, meta, stage_images, fused, tra8)
-    fig3 = tuple(result.shape.fig3_stages)
-    fig3_stages(stage_images, fig3, cfg.dtdi.beta_bits, out / "fig3_stages.png", meta)
-    _fig4(out, cfg, result, meta, stage_images, fused, tra8, panel)
-    write_table1(out / "table1.csv", result)
-    files_written()

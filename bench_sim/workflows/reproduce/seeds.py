@@ -21,13 +21,15 @@ __all__ = ["headline_numbers", "seed_spread", "spread_section", "HEADLINES"]
 #: headline number -> (path in metrics.json's dict, label in the report)
 HEADLINES: dict[str, tuple[tuple[str, ...], str]] = {
     "dr_db_gamma1": (("dr_db", "gamma1"), "DR of Gamma1 [dB] (through the chain, temporal)"),
-    "dr_db_gamma2": (("dr_db", "gamma2"), "DR of Gamma2 [dB]"),
-    "dr_db_gamma_hdr": (("dr_db", "gamma_hdr"), "DR of Gamma_HDR [dB]"),
+    "dr_db_gamma2": (("dr_db", "gamma2"), "DR of Gamma2 [dB] (through the chain, temporal)"),
+    "dr_db_gamma_hdr": (("dr_db", "gamma_hdr"), "DR of Gamma_HDR [dB] (through the chain, temporal)"),
     "gain_db_vs_gamma1": (("delta_dr_db_vs_gamma1",), "gain over Gamma1 [dB]"),
     "gain_db_vs_gamma2": (("delta_dr_db_vs_gamma2",), "gain over Gamma2 [dB]"),
     "snr_darkest_gamma1": (("darkest_patch", "snr", "gamma1"), "spatial SNR, darkest patch, Gamma1"),
     "snr_darkest_gamma2": (("darkest_patch", "snr", "gamma2"), "spatial SNR, darkest patch, Gamma2"),
     "snr_darkest_gamma_hdr": (("darkest_patch", "snr", "gamma_hdr"), "spatial SNR, darkest patch, Gamma_HDR"),
+    "truth_bias_eq11": (("fusion_truth", "rules", "eq11", "error", "whole", "bias"),
+                        "eq. 11: mean relative error against truth, whole image"),
     "truth_rms_eq11": (("fusion_truth", "rules", "eq11", "error", "whole", "rms"),
                        "eq. 11: RMS relative error against truth, whole image"),
     "truth_bias_eq11_edge": (("fusion_truth", "rules", "eq11", "error", "spot_edge", "bias"),

@@ -8,6 +8,7 @@ from typing import Any
 from bench_sim.io import markdown_table
 from bench_sim.measure.fusion_scores import RULES
 from bench_sim.workflows.reproduce.truth_figures import ERROR_FIGURE, LIGHT_RATIO_FIGURE
+from bench_sim.workflows.reproduce.wording import pct
 
 __all__ = ["truth_section", "clipped_source_sentence", "truth_winner"]
 
@@ -16,20 +17,22 @@ _REGIONS = {"whole": "whole image", "spot": "under the spot", "fill": "under the
 
 
 def _pct(x: float | None, sign: bool = True) -> str:
-    return "n/a" if x is None else (f"{100 * x:+.2f} %" if sign else f"{100 * x:.2f} %")
+    return pct(x, 2, sign)
 
 
 def clipped_source_sentence(t: dict[str, Any], mu2: int) -> str:
-    """How many of eq. 11's Gamma_HDR pixels come from a clipped Gamma2 (never "0 %" unless so)."""
+    """How many of eq. 11's Gamma_HDR pixels come from a stage clipped there (never "0 %" unless
+    so): by the truth's clip flags (pixel, ADC or word, either stage) and by the words at their top."""
     e = t["rules"]["eq11"]
     n, frac, top = e["from_clipped_pixels"], e["from_clipped_fraction"], e["from_word_top_fraction"]
     if n == 0:
-        return f"No Gamma_HDR pixel is taken from a clipped stage (the truth's clip flags of stage {mu2})."
+        return "No Gamma_HDR pixel is taken from a clipped stage (the truth's clip flags of both stages)."
     return (
-        f"{frac:.2%} of Gamma_HDR's pixels ({n}) are taken from a clipped Gamma2 (stage {mu2}; by the "
-        f"truth's clip flags; {top:.2%} by the word at its top, a count anyone can redo from "
-        "gamma1.tiff and gamma2.tiff): eq. 11 keeps Gamma2 wherever Gamma1 predicts it inside the "
-        "word, and there it is already clipped."
+        f"{pct(frac, 2)} of Gamma_HDR's pixels ({n}) are taken from a stage that clipped there (the "
+        f"truth's clip flags: pixel, ADC or word, stage {mu2} or the other); {pct(top, 2)} from a stage "
+        "word at its top, a count anyone can redo from gamma1.tiff and gamma2.tiff. Eq. 11 keeps "
+        f"Gamma2 wherever Gamma1 predicts it inside the word, where stage {mu2} may already have "
+        "clipped, and takes the scaled Gamma1 elsewhere, clipped or not."
     )
 
 
@@ -56,7 +59,7 @@ def truth_section(t: dict[str, Any], mu1: int, mu2: int) -> list[str]:
             f"{_pct(rules[k]['error'][region]['bias'])} / {_pct(rules[k]['error'][region]['rms'], False)}"
             for k in rules
         ), str(t["region_pixels"][region])])
-    clipped = (f"{rules[k]['from_clipped_fraction']:.2%}" for k in rules)
+    clipped = (pct(rules[k]["from_clipped_fraction"], 2) for k in rules)
     rows.append(["from a clipped stage", *clipped, ""])
     best, worst = truth_winner(t)
     winner = RULES[best]
@@ -64,14 +67,15 @@ def truth_section(t: dict[str, Any], mu1: int, mu2: int) -> list[str]:
     why = (
         f"The light per row changes over the TDI window: r, the mean light per row over the {mu2} rows "
         f"of stage {mu2} against that over the {mu1} rows of stage {mu1}, leaves 1 +- {tol:g} on "
-        f"{lr['outside_fraction']:.2%} of the pixels (1st-99th percentile {lr['p01']:.3f}-{lr['p99']:.3f}, "
+        f"{pct(lr['outside_fraction'], 2)} of the pixels (1st-99th percentile "
+        f"{lr['p01']:.3f}-{lr['p99']:.3f}, "
         f"largest |r - 1| = {lr['max_abs_dev']:.2f}). Eq. 11 assumes Gamma2 = (mu2/mu1) Gamma1, i.e. "
         "r = 1; where r != 1 the branch from Gamma1 is off by 1/r, and Gamma2 may clip where Gamma1 "
         "says it does not."
     )
     if edge["bias"] is not None:
         why += (f" Along the spot edge eq. 11's Gamma_HDR is {_pct(edge['bias'])} off the truth on "
-                f"average (RMS {_pct(edge['rms'])}).")
+                f"average (RMS {_pct(edge['rms'], False)}).")
     return [
         "## Gamma_HDR against its exact truth",
         "",
