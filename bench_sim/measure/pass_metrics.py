@@ -22,9 +22,11 @@ from bench_sim.config import BenchConfig
 from bench_sim.fusion.common import FusionResult
 from bench_sim.metrics.histogram import Eq18Result, evaluate_eq18
 from bench_sim.pipeline import PassResult
-from bench_sim.sensor.model import stage_offset_dn
+from bench_sim.sensor.model import dark_noise_e, stage_offset_dn, stage_variance_dn2
 
-__all__ = ["PassMetrics", "pass_metrics", "patch_slices", "spatial_snr", "SNR_IN_NOISE", "SNR_ROSE"]
+__all__ = [
+    "PassMetrics", "pass_metrics", "patch_slices", "spatial_snr", "temporal_snr", "SNR_IN_NOISE", "SNR_ROSE",
+]
 
 #: SNR below which a patch counts as "in the noise", and the Rose criterion for "out of it"
 SNR_IN_NOISE = 2.0
@@ -214,7 +216,42 @@ def pass_metrics(cfg: BenchConfig, sim: PassResult, fused: FusionResult) -> Pass
     if not truth:
         return PassMetrics(eq18, sat, dark, bright, qualitative)
     scene_db, captured, clipped = _truth_ranges(sim, fused, mu1, mu2, images, wedge, level, bright)
+    dark["temporal_snr"] = temporal_snr(cfg, sim, fused, wedge[darkest])
     return PassMetrics(eq18, sat, dark, bright, qualitative, None, scene_db, captured, clipped)
+
+
+def temporal_snr(
+    cfg: BenchConfig, sim: PassResult, fused: FusionResult, sl: tuple[slice, slice]
+) -> dict[str, float]:
+    """Temporal SNR of a patch in ``gamma1``, ``gamma2`` and ``gamma_hdr``, from the pass's truth.
+
+    ``SNR = mean(mu) / sqrt(mean(sigma^2))`` over the patch's pixels: ``mu`` the expected signal
+    of the stage word above its offset (the truth's ``linear_dn`` less
+    :func:`bench_sim.sensor.model.stage_offset_dn`), ``sigma^2`` its temporal variance, ``m``
+    independent reads of the pixel's own mean signal (:func:`bench_sim.sensor.model.
+    stage_variance_dn2` on the truth's ``photons``; EMVA 1288 R4 eq. 7 per read). The noise of
+    one image over repeated exposures of the same scene, not the spread over the patch (which adds
+    the fixed pattern and shading: :func:`spatial_snr`). ``gamma_hdr`` takes each pixel's source
+    stage (``fused.source``) scaled to ``mu2`` units as eq. 11 does. Linear range: valid where
+    the patch does not clip (the darkest patch).
+    """
+    s, mu1, mu2 = cfg.sensor, cfg.fusion.mu1, cfg.fusion.mu2
+    sd_dark = dark_noise_e(s, sim.setup.geom.t_int_s)
+    sig: dict[int, np.ndarray] = {}
+    var: dict[int, np.ndarray] = {}
+    for m in (mu1, mu2):
+        photons = sim.dataset["photons"].sel(stage=m).values[sl]
+        var[m] = stage_variance_dn2(
+            m, s.quantum_efficiency * photons / m, conversion_gain_dn_per_e=s.conversion_gain_dn_per_e,
+            dark_noise_e=sd_dark, quantization=s.quantization, shot_noise=s.shot_noise,
+        )
+        sig[m] = sim.dataset["linear_dn"].sel(stage=m).values[sl] - stage_offset_dn(s, cfg.dtdi, m)
+    low = fused.source[sl] == mu1
+    scale = mu2 / mu1
+    hdr_sig = np.where(low, sig[mu1] * scale, sig[mu2])
+    hdr_var = np.where(low, var[mu1] * scale**2, var[mu2])
+    pairs = {"gamma1": (sig[mu1], var[mu1]), "gamma2": (sig[mu2], var[mu2]), "gamma_hdr": (hdr_sig, hdr_var)}
+    return {k: float(np.mean(a) / math.sqrt(float(np.mean(v)))) for k, (a, v) in pairs.items()}
 
 
 def _range_db(levels: list[float]) -> float:

@@ -23,7 +23,13 @@ from collections.abc import Iterable, Mapping
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.io import image_shape
-from bench_sim.pipeline import IMAGE_DIMS, RENDER_CHUNK_FRAMES, pass_variables, stage_pixel_bytes
+from bench_sim.pipeline import (
+    IMAGE_DIMS,
+    RENDER_CHUNK_FRAMES,
+    TRUTH_BAND_LINES,
+    pass_variables,
+    stage_pixel_bytes,
+)
 from bench_sim.render.texture import BLOCK_ROWS, CACHE_BLOCKS
 from bench_sim.runtime.resources import BASE_MITSUBA_BYTES, BASE_PROCESS_BYTES, MiB, ResourceEstimate
 
@@ -48,6 +54,9 @@ RASTER_BYTES_PER_TEXEL = 40
 #: Fast engine: Mitsuba's film and the records' float64 work arrays per record (sub-pixel sample
 #: position), independent of ``spp`` (about 190 measured) [bytes].
 RECORD_BYTES = 256
+#: Lines of a streamed ``simulate`` held in memory beyond ``max(stages)``: the truth's band
+#: (:data:`bench_sim.pipeline.TRUTH_BAND_LINES`), a block of lines and a row of Zarr chunks.
+STREAMED_LINES = 4 * TRUTH_BAND_LINES + 256
 #: Reference engine: Mitsuba's film and wavefront per pixel of a frame [bytes].
 REFERENCE_BYTES_PER_PIXEL = 256
 
@@ -150,20 +159,31 @@ def _stage_arrays(cfg: BenchConfig, stages: Iterable[int], truth: bool) -> tuple
     return pix * per, per
 
 
-def estimate_simulate(cfg: BenchConfig, stages: Iterable[int], fmt: str = "zarr") -> ResourceEstimate:
+def estimate_simulate(cfg: BenchConfig, stages: Iterable[int], fmt: str | None = None) -> ResourceEstimate:
     """``bench-sim simulate`` / :func:`bench_sim.simulate`: a pass with its truth, the dataset
-    and its encoding for the file."""
+    and its encoding for the file. ``fmt = "zarr"``: the store is written while the pass runs
+    (:mod:`bench_sim.workflows.simulate_store`), so memory holds the lines in flight only (about
+    ``max(stages)`` plus a band of the truth and a row of Zarr chunks, bounded here by
+    :data:`STREAMED_LINES`); any other format (or ``None``: a pass kept in memory, as sweeps and
+    data sets run it) holds every stage image."""
     st = sorted(int(m) for m in stages)
     frames = cfg.lines + st[-1] - 1
     n_pix = len(st) * cfg.lines * cfg.sensor.columns
-    arrays, _ = _stage_arrays(cfg, st, truth=True)
+    arrays, per = _stage_arrays(cfg, st, truth=True)
     mem = pass_memory(cfg, frames, rows=st[-1])
-    mem[f"stage images and truth ({len(st)} stages x {cfg.lines} x {cfg.sensor.columns})"] = arrays
-    mem["file encoding (largest variable)"] = n_pix * 8
-    hdr = cfg.lines * cfg.sensor.columns * sum(v.array_dtype(cfg.dtdi.beta_bits).itemsize
-                                                for v in pass_variables(IMAGE_DIMS))
+    images = pass_variables(IMAGE_DIMS, maps=True)
+    image_bytes = sum(v.array_dtype(cfg.dtdi.beta_bits).itemsize for v in images)
+    hdr = cfg.lines * cfg.sensor.columns * image_bytes
+    if fmt == "zarr":
+        held = min(cfg.lines, st[-1] + STREAMED_LINES)
+        mem[f"lines in flight ({len(st)} stages x {held} x {cfg.sensor.columns})"] = (
+            len(st) * held * cfg.sensor.columns * per + held * cfg.sensor.columns * image_bytes
+        )
+    else:
+        mem[f"stage images and truth ({len(st)} stages x {cfg.lines} x {cfg.sensor.columns})"] = arrays + hdr
+        mem["file encoding (largest variable)"] = n_pix * 8
     # on disk the words take the widest word's bytes (an upper bound for any beta)
-    disk = {"stage images and truth": n_pix * stage_pixel_bytes(None, truth=True), "hdr": hdr}
+    disk = {"stage images and truth": n_pix * stage_pixel_bytes(None, truth=True), "hdr and maps": hdr}
     return ResourceEstimate("simulate", mem, disk, _hint(cfg, f"the stages ({len(st)})"))
 
 

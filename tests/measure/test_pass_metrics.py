@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
-from bench_sim.measure.pass_metrics import pass_metrics
+from bench_sim.measure.pass_metrics import pass_metrics, patch_slices
 from bench_sim.pipeline import run_pass
+from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import stage_offset_dn
 from tests.conftest import tiny_cfg
 
@@ -47,3 +49,32 @@ def test_a_target_without_wedge_says_so_instead_of_failing() -> None:
     assert pm.no_patches == "target.layout = 'uniform' has no wedge patches"
     assert 0.0 <= pm.saturated_fraction["gamma2"] <= 1.0
     assert math.isfinite(pm.eq18.omega_hdr)
+
+
+@pytest.mark.slow
+def test_temporal_snr_from_the_truth_matches_repeated_exposures() -> None:
+    """The darkest patch's temporal SNR from the truth (closed-form variance of each pixel's stage
+    word) against the noise measured over repeated exposures of the same scene by the same
+    physical sensor: per pixel the mean and variance over ``n`` noise seeds, then mean signal over
+    root mean variance. The relative standard error of a variance from ``n`` draws averaged over
+    ``P`` pixels is ``sqrt(2 / ((n - 1) P))``; the SNR's is half that; 4 of them are allowed."""
+    lights = {"weak": {"irradiance_w_m2": 60.0}}
+    cfg = tiny_cfg(lines=96, lights=lights)
+    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
+    offsets = tuple(stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2))
+    first = run_pass(cfg, (mu1, mu2), 0)
+    fp = draw_fixed_pattern(cfg.sensor, np.random.default_rng(123))
+    runs = [run_pass(cfg, (mu1, mu2), seed, fixed_pattern=fp) for seed in range(1, 13)]
+    fused = fuse_dtdi_hdr_eq11(runs[0].stage_dn[mu1], runs[0].stage_dn[mu2], mu1=mu1, mu2=mu2,
+                               beta=cfg.dtdi.beta_bits, pedestal_dn=offsets)
+    pm = pass_metrics(cfg, runs[0], fused)
+    sl = patch_slices(first.setup.grid.panel, first.setup.geom, cfg, cfg.lines)[pm.darkest_patch["patch"]]
+    predicted = pm.darkest_patch["temporal_snr"]
+    n_pix = np.ones(runs[0].stage_dn[mu1].shape)[sl].size
+    for name, m in (("gamma1", mu1), ("gamma2", mu2)):
+        stack = np.stack([r.stage_dn[m][sl].astype(np.float64) for r in runs])
+        measured = (stack.mean(axis=0) - stage_offset_dn(cfg.sensor, cfg.dtdi, m)).mean() / math.sqrt(
+            stack.var(axis=0, ddof=1).mean())
+        rel_se = 0.5 * math.sqrt(2.0 / ((len(runs) - 1) * n_pix))
+        assert measured == pytest.approx(predicted[name], rel=4 * rel_se + 0.01), (name, measured, predicted)
+    assert predicted["gamma_hdr"] == pytest.approx(predicted["gamma2"], rel=1e-9)  # eq. 11 keeps Gamma2 there
