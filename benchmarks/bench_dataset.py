@@ -1,38 +1,42 @@
-"""Throughput, size on disk and memory of ``bench-sim dataset`` at 256 x 256 with stages {10, 80}.
+"""Samples per minute of ``bench-sim dataset`` at 256 x 256 with stages {10, 80} on 2 Dask workers,
+this checkout against the main branch before the speed work (A/B, :mod:`baseline`), and the time
+to the first finished sample.
 
-The spec is ``scenes/datasets/example.toml`` (spot and fill levels, sync error and target drawn
-per sample) with its number of samples changed. For 1 and 2 workers of a local Dask cluster
-(the execution layer's ``open_client``), it:
-
-1. warms the workers up with a 2-sample dataset (imports, Mitsuba's JIT),
-2. times a dataset of ``--samples`` samples: samples per minute, and the 2-worker speed-up,
-3. on the 2-worker cluster, makes a dataset of 3 x ``--samples`` samples next and compares the
-   workers' peak resident memory (``ru_maxrss``) after each run: flat in the number of samples
-   when a worker holds one sample at a time. The client's peak is printed too.
+The spec is ``scenes/datasets/example.toml`` (the package's copy: spot and fill levels, sync
+error and target drawn per sample) with its number of samples changed to ``--samples``. Both
+sides make it as a separate ``bench-sim dataset --workers 2`` process, as a user would, in pairs
+interleaved A, B, A, B (``--repeat`` pairs), so a change of the machine's load hits both alike.
+Per side: the median wall time and CPU time (user + system of the process and its workers),
+samples per minute (samples / median wall), and the time from the process's start to the first
+sample's record (``samples/NNNNNNNN.json``, its modification time). The ratio is this checkout's
+samples per minute over the baseline's. Bytes per sample on disk (Zarr v3, Zstandard) are
+printed beside the uncompressed size.
 
 ``--rss-samples K`` instead makes K samples one after the other in this process (what a worker
 does) and prints its resident memory every 8 samples.
 
-Bytes per sample: the size of ``data.zarr`` (Zarr v3, Zstandard) over the samples, beside the
-uncompressed size of a sample's arrays. Timings are wall-clock on whatever else the machine runs:
-the load average before each timed run is printed with it.
-
-Usage: python benchmarks/bench_dataset.py [--samples 8] [--keep DIR] [--rss-samples K]
+Usage: python benchmarks/bench_dataset.py [--samples 6] [--repeat 2] [--workers 2]
+       [--baseline REV | --no-baseline] [--keep DIR] [--rss-samples K]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import resource
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-from bench_sim.config import SCENES_DIR
-from bench_sim.runtime.execution import open_client
-from bench_sim.workflows.dataset.run import bytes_per_sample, run_dataset
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from baseline import Side, add_baseline_args, load_line, median, paired  # noqa: E402
+
+from bench_sim.config import SCENES_DIR  # noqa: E402
+from bench_sim.workflows.dataset.reader import read_records  # noqa: E402
+from bench_sim.workflows.dataset.run import SampleTask, bytes_per_sample, make_sample  # noqa: E402
+from bench_sim.workflows.dataset.spec import load_spec, sample_streams  # noqa: E402
 
 EXAMPLE = SCENES_DIR / "datasets" / "example.toml"
 
@@ -48,23 +52,8 @@ def _spec(folder: Path, samples: int) -> Path:
     return path
 
 
-def _worker_peak_mib(client) -> list[float]:
-    peaks = client.run(lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
-    return [kib / 1024 for kib in peaks.values()]
-
-
-def _run(client, spec: Path, out: Path) -> float:
-    t0 = time.perf_counter()
-    run = run_dataset(spec, out, scheduler=client.scheduler.address)
-    assert run.done, run.failed
-    return time.perf_counter() - t0
-
-
 def _rss_series(samples: int) -> None:
     """Resident memory of one process making ``samples`` samples of the example in a row."""
-    from bench_sim.workflows.dataset.run import SampleTask, make_sample
-    from bench_sim.workflows.dataset.spec import load_spec, sample_streams
-
     with tempfile.TemporaryDirectory() as tmp:
         spec = load_spec(_spec(Path(tmp), samples))
         for i in range(samples):
@@ -76,11 +65,37 @@ def _rss_series(samples: int) -> None:
                 print(f"after {i + 1:4d} samples: resident {mib:6.0f} MiB", flush=True)
 
 
+def _first_record_s(folder: Path, started: float) -> float:
+    """Seconds from ``started`` (epoch [s]) to the first sample record in ``folder``."""
+    stamps = [p.stat().st_mtime for p in folder.glob("*.json")]
+    return min(stamps) - started if stamps else float("nan")
+
+
+def _report(sides: list[Side], times: dict[str, list[tuple[float, float]]], first: dict[str, list[float]],
+            n: int, repeat: int) -> None:
+    print(f"  {'side':<22} {'wall s':>7} {'CPU s':>7} {'samples/min':>11} {'first sample s':>14}"
+          f"   (medians of {repeat})")
+    rate = {}
+    for side in sides:
+        wall = median([t[0] for t in times[side.name]])
+        cpu = median([t[1] for t in times[side.name]])
+        rate[side.name] = 60.0 * n / wall
+        print(f"  {side.name:<22} {wall:7.1f} {cpu:7.1f} {rate[side.name]:11.2f} "
+              f"{median(first[side.name]):14.1f}")
+    if len(sides) == 2:
+        ratio = rate[sides[0].name] / rate[sides[1].name]
+        print(f"  samples per minute, this checkout / baseline: {ratio:.2f}")
+    print(f"  {load_line()} (at the end; CPU s: the process and its workers, user + system)")
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--samples", type=int, default=8)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--samples", type=int, default=6)
+    ap.add_argument("--repeat", type=int, default=2, help="A/B pairs")
+    ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--keep", type=Path, default=None, help="keep the datasets in this folder")
     ap.add_argument("--rss-samples", type=int, default=0, help="only: memory of one process over K samples")
+    add_baseline_args(ap)
     a = ap.parse_args()
     if a.rss_samples:
         _rss_series(a.rss_samples)
@@ -88,32 +103,35 @@ def main() -> None:
     tmp = Path(tempfile.mkdtemp(prefix="bench_dataset_")) if a.keep is None else a.keep
     tmp.mkdir(parents=True, exist_ok=True)
     n = a.samples
-    warm, spec, spec_more = _spec(tmp, 2), _spec(tmp, n), _spec(tmp, 3 * n)
-    rate: dict[int, float] = {}
+    spec = _spec(tmp, n)
+    sides = [Side.current()] + ([] if a.no_baseline else [Side.of_rev(a.baseline)])
+    first: dict[str, list[float]] = {s.name: [] for s in sides}
+
+    def run(side: Side, i: int) -> tuple[float, float]:
+        out = tmp / f"{'ab'[sides.index(side)]}_{i}"
+        started = time.time()
+        # cwd: a folder without a bench_sim package (``python -m`` puts the cwd first on sys.path,
+        # ahead of the side's PYTHONPATH: run from the checkout, both sides would be the checkout)
+        wall, cpu = side.bench_sim("dataset", str(spec), "--out", str(out), "--workers", str(a.workers),
+                                   cwd=tmp)
+        done = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
+        if done != n:
+            raise RuntimeError(f"{side.name}: {done} of {n} samples complete")
+        first[side.name].append(_first_record_s(out / "samples", started))
+        print(f"  {side.name:<22} run {i}: {wall:6.1f} s wall, {cpu:6.1f} s CPU, first sample after "
+              f"{first[side.name][-1]:5.1f} s ({load_line()})", flush=True)
+        return wall, cpu
+
+    print(f"dataset of {n} samples of the example spec (256 x 256, stages 10 and 80), {a.workers} workers, "
+          f"each run a bench-sim process; {load_line()}", flush=True)
     try:
-        for workers in (1, 2):
-            with open_client(workers=workers) as client:
-                _run(client, warm, tmp / f"warm_{workers}")
-                load = os.getloadavg()[0]
-                wall = _run(client, spec, tmp / f"data_{workers}")
-                rate[workers] = 60.0 * n / wall
-                print(f"{workers} worker(s): {n} samples in {wall:6.1f} s = {rate[workers]:5.2f} samples/min "
-                      f"(load average before: {load:.1f} on {os.cpu_count()} cores)")
-                if workers == 2:
-                    peak_n = _worker_peak_mib(client)
-                    _run(client, spec_more, tmp / "data_more")
-                    peak_3n = _worker_peak_mib(client)
-        print(f"speed-up 2 / 1 workers: {rate[2] / rate[1]:.2f}")
-        store = tmp / "data_2" / "data.zarr"
+        times = paired(sides, run, a.repeat)
+        _report(sides, times, first, n, a.repeat)
+        store = tmp / "a_0" / "data.zarr"
         on_disk = sum(f.stat().st_size for f in store.rglob("*") if f.is_file())
         raw = bytes_per_sample(2, 256, 256, True)
-        print(f"bytes per sample on disk: {on_disk / n / 2**20:.2f} MiB "
+        print(f"  bytes per sample on disk (this checkout): {on_disk / n / 2**20:.2f} MiB "
               f"(uncompressed arrays {raw / 2**20:.2f} MiB, ratio {on_disk / n / raw:.2f})")
-        print("peak resident memory per worker [MiB]: after "
-              f"{n} samples {', '.join(f'{p:.0f}' for p in peak_n)}; after {n} + {3 * n} samples "
-              f"{', '.join(f'{p:.0f}' for p in peak_3n)}")
-        client_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        print(f"peak resident memory of the client (writes every sample): {client_peak:.0f} MiB")
     finally:
         if a.keep is None:
             shutil.rmtree(tmp, ignore_errors=True)

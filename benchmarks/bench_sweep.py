@@ -1,27 +1,42 @@
-"""Points per minute of a 16-point light-power sweep at ``--quick`` size on 1 and 2 Dask
-workers, against running ``bench-sim reproduce --quick`` once per point (what a scenario study
-cost before sweeps), and the Mitsuba renders each makes (the fast engine's per-light records
-are rendered once per worker and reused for every power).
+"""Points per minute of a light-power sweep at ``--quick`` size on 2 Dask workers, this checkout
+against the main branch before the speed work (A/B, :mod:`baseline`), and the time to the first
+finished point.
 
-Every run is a separate ``bench-sim`` process, as a user would start it; all are timed in this
-one script run, so the ratios compare like with like on a loaded machine.
+Both sides run the same spec (``--points`` light powers of the paper rig's spot, ``--quick``:
+512 x 256, M = 100) as a separate ``bench-sim sweep --workers 2`` process, as a user would, in
+pairs interleaved A, B, A, B (``--repeat`` pairs), so a change of the machine's load hits both
+alike. Per side: the median wall time and CPU time (user + system of the process and its
+workers), points per minute (points / median wall), the time from the process's start to the
+first point's journal record (``points/NNNNNN.json``, its modification time), and the Mitsuba
+renders (``sweep.json``). The ratio is this checkout's points per minute over the baseline's.
 
-Usage: python benchmarks/bench_sweep.py [--points 16] [--reproduce-runs 16]
-(``--reproduce-runs k < points`` times k runs and scales to ``points``.)
+What the sweep's points share -- the light records (a power changes none), the camera's
+measured dynamic range, the rasterised target -- is made once per sweep on this checkout; the
+baseline makes the records and the DR once per worker and rasterises the target per point.
+
+The powers stop at ``--max-power`` (default 256 W/m^2): above, the spot clips and the exact
+truth of the clipped pixels dominates a point on both sides (a cost of the sensor's truth, not
+of what this benchmark is about).
+
+Usage: python benchmarks/bench_sweep.py [--points 8] [--repeat 2] [--workers 2]
+       [--baseline REV | --no-baseline] [--keep DIR]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import resource
-import subprocess
+import shutil
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from bench_sim.config import SCENES_DIR
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from baseline import Side, add_baseline_args, load_line, median, paired  # noqa: E402
+
+from bench_sim.config import SCENES_DIR  # noqa: E402
 
 SPEC = """
 name = "bench_light_power"
@@ -30,55 +45,69 @@ quick = true
 seed = 0
 [[parameters]]
 key = "lights.strong.irradiance_w_m2"
-logspace = {{ start = 8.0, stop = 2048.0, num = {points} }}
+logspace = {{ start = 8.0, stop = {stop}, num = {points} }}
 """
 
 
-def _bench_sim(*args: str) -> tuple[float, float]:
-    """Wall time [s] and CPU time [s] (user + system of the process and its workers) of one
-    ``bench-sim`` run."""
-    exe = Path(sys.executable).with_name("bench-sim")
-    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    subprocess.run([str(exe), *args], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    wall = time.perf_counter() - t0
-    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return wall, (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)
+def first_record_s(folder: Path, started: float) -> float:
+    """Seconds from ``started`` (epoch [s]) to the first journal record in ``folder``."""
+    stamps = [p.stat().st_mtime for p in folder.glob("*.json")]
+    return min(stamps) - started if stamps else float("nan")
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--points", type=int, default=16)
-    ap.add_argument("--reproduce-runs", type=int, default=16)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--points", type=int, default=8)
+    ap.add_argument("--repeat", type=int, default=2, help="A/B pairs")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--max-power", type=float, default=256.0, help="highest spot irradiance [W/m^2]")
+    ap.add_argument("--keep", type=Path, default=None, help="keep the sweeps in this folder")
+    add_baseline_args(ap)
     a = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        spec = Path(tmp) / "light_power.toml"
-        spec.write_text(SPEC.format(base=SCENES_DIR / "paper_rig.toml", points=a.points))
-        rows = []
-        for workers in (1, 2):
-            out = Path(tmp) / f"sweep_{workers}"
-            wall, cpu = _bench_sim("sweep", str(spec), "--out", str(out), "--workers", str(workers))
-            meta = json.loads((out / "sweep.json").read_text())
-            assert meta["ok"] == a.points, meta
-            name = f"sweep, {workers} worker{'s' if workers > 1 else ''}"
-            rows.append((name, wall, cpu, meta["mitsuba_renders"]))
-        k = max(1, min(a.reproduce_runs, a.points))
-        runs = [_bench_sim("reproduce", "--quick", "--out", str(Path(tmp) / f"rep_{i}")) for i in range(k)]
-        # each reproduce process renders its records anew (metrics.json: renders of that process)
-        renders = int(json.loads((Path(tmp) / "rep_0" / "metrics.json").read_text())["mitsuba_renders"])
-        rows.append((f"reproduce --quick x {a.points}" + ("" if k == a.points else f" (timed {k}, scaled)"),
-                     sum(r[0] for r in runs) * a.points / k, sum(r[1] for r in runs) * a.points / k,
-                     renders * a.points))
-    base, base_cpu = rows[-1][1], rows[-1][2]
-    print(f"{a.points}-point light-power sweep at --quick size (512 x 256, M = 100), "
-          "each run a bench-sim process")
-    print(f"  {'run':<34} {'wall s':>7} {'points/min':>10} {'x reproduce':>11} {'CPU s':>7} "
-          f"{'x reproduce':>11} {'Mitsuba renders':>15}")
-    for name, wall, cpu, renders in rows:
-        print(f"  {name:<34} {wall:7.1f} {60 * a.points / wall:10.2f} {base / wall:11.2f} {cpu:7.1f} "
-              f"{base_cpu / cpu:11.2f} {renders:15d}")
-    print("  (CPU s: user + system time of the run and its worker processes; on a loaded machine the "
-          "wall-time ratios understate what idle cores give)")
+    tmp = Path(tempfile.mkdtemp(prefix="bench_sweep_")) if a.keep is None else a.keep
+    tmp.mkdir(parents=True, exist_ok=True)
+    spec = tmp / "light_power.toml"
+    spec.write_text(SPEC.format(base=SCENES_DIR / "paper_rig.toml", stop=a.max_power, points=a.points))
+    sides = [Side.current()] + ([] if a.no_baseline else [Side.of_rev(a.baseline)])
+    first: dict[str, list[float]] = {s.name: [] for s in sides}
+    renders: dict[str, int] = {}
+
+    def run(side: Side, i: int) -> tuple[float, float]:
+        out = tmp / f"{'ab'[sides.index(side)]}_{i}"
+        started = time.time()
+        # cwd: a folder without a bench_sim package (``python -m`` puts the cwd first on sys.path,
+        # ahead of the side's PYTHONPATH: run from the checkout, both sides would be the checkout)
+        wall, cpu = side.bench_sim("sweep", str(spec), "--out", str(out), "--workers", str(a.workers),
+                                   cwd=tmp)
+        meta = json.loads((out / "sweep.json").read_text())
+        if meta["ok"] != a.points:
+            raise RuntimeError(f"{side.name}: {meta['ok']} of {a.points} points ok")
+        first[side.name].append(first_record_s(out / "points", started))
+        renders[side.name] = int(meta["mitsuba_renders"])
+        print(f"  {side.name:<22} run {i}: {wall:6.1f} s wall, {cpu:6.1f} s CPU, first point after "
+              f"{first[side.name][-1]:5.1f} s ({load_line()})", flush=True)
+        return wall, cpu
+
+    print(f"{a.points}-point light-power sweep (8 .. {a.max_power:g} W/m^2) at --quick size, "
+          f"{a.workers} workers, each run a bench-sim process; {load_line()}", flush=True)
+    try:
+        times = paired(sides, run, a.repeat)
+    finally:
+        if a.keep is None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    print(f"  {'side':<22} {'wall s':>7} {'CPU s':>7} {'points/min':>10} {'first point s':>13} "
+          f"{'renders':>7}   (medians of {a.repeat})")
+    rate = {}
+    for side in sides:
+        wall = median([t[0] for t in times[side.name]])
+        cpu = median([t[1] for t in times[side.name]])
+        rate[side.name] = 60.0 * a.points / wall
+        print(f"  {side.name:<22} {wall:7.1f} {cpu:7.1f} {rate[side.name]:10.2f} "
+              f"{median(first[side.name]):13.1f} {renders[side.name]:7d}")
+    if len(sides) == 2:
+        ratio = rate[sides[0].name] / rate[sides[1].name]
+        print(f"  points per minute, this checkout / baseline: {ratio:.2f}")
+    print(f"  {load_line()} (at the end; CPU s: the process and its workers, user + system)")
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.records import (
     REFERENCE_IRRADIANCE_W_M2,
+    LightRecords,
     light_power_w_m2,
     light_records,
     render_array,
@@ -44,7 +45,11 @@ from bench_sim.rig.lights import frame_weights
 from bench_sim.rig.scene import light_names, scene_dict
 from bench_sim.runtime.parallel import parallel_map, thread_count
 
-__all__ = ["ReferenceEngine", "FastEngine", "check_fast_engine_valid"]
+__all__ = ["ReferenceEngine", "FastEngine", "check_fast_engine_valid", "KERNEL_ENTRIES"]
+
+#: Kernel sets kept with a record set (one per grid: a data set whose drum speed varies per
+#: sample makes a new one per sample; the least recently used are dropped)
+KERNEL_ENTRIES = 4
 
 
 #: The Mitsuba parameter holding each kind of light's emitted quantity (under the light's name).
@@ -155,14 +160,19 @@ class FastEngine:
 
     def __init__(
         self, mi: Any, cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, seed: int, first_frame: int = 0,
-        *, variant: str | None = None,
+        *, variant: str | None = None, records: LightRecords | None = None,
     ) -> None:
         """``seed`` is not used: the records are rendered with
-        :data:`bench_sim.render.records.RECORD_SEED` (see :mod:`bench_sim.render.records`)."""
+        :data:`bench_sim.render.records.RECORD_SEED` (see :mod:`bench_sim.render.records`).
+        ``records``: the scene's records already at hand (from the process cache,
+        :func:`~bench_sim.render.records.cached_records`); ``mi`` may then be ``None``."""
         check_fast_engine_valid(cfg)
         self.cfg, self.geom, self.grid = cfg, geom, grid
         self.first_frame = int(first_frame)
-        self.records, self.rendered = light_records(mi, cfg, geom, variant or mi.variant())
+        if records is not None:
+            self.records, self.rendered = records, False
+        else:
+            self.records, self.rendered = light_records(mi, cfg, geom, variant or mi.variant())
         self.renders = self.records.renders if self.rendered else 0
         # the lights that emit in this bench and their power relative to the records'
         emitting = light_names(cfg)
@@ -180,10 +190,14 @@ class FastEngine:
         grid = self.grid
         key = ("kernels", grid.q, grid.h_y_m, grid.h_x_m, grid.x_start_m, self.geom.y_offset_m,
                self.geom.radius_m)
-        kern = self.records.derived.get(key)
+        derived = self.records.derived
+        kern = derived.pop(key, None)
         if kern is None:
             kern = self._kernels()
-            self.records.derived[key] = kern
+        derived[key] = kern  # the most recent last; the oldest dropped beyond KERNEL_ENTRIES
+        kept = [k for k in list(derived) if isinstance(k, tuple) and k[:1] == ("kernels",)]
+        for old in kept[:-KERNEL_ENTRIES]:
+            derived.pop(old, None)
         return kern
 
     def _kernels(self) -> list[_RowKernel]:

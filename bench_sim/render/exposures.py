@@ -4,6 +4,10 @@
 then streams frames in chunks, each ``(chunk, rows M, columns N)`` photons, so a long pass never
 holds all frames at once. Radiometry (camera equation, cos^4, pixel area, integration time,
 photon energy) and the optional Airy PSF are applied per chunk.
+
+:func:`fast_records` makes the fast engine's light records of a config by themselves (a task
+that several passes share: :mod:`bench_sim.render.records`) and :func:`records_group` names the
+passes that can share them, without Mitsuba.
 """
 
 from __future__ import annotations
@@ -19,12 +23,18 @@ from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.engines import FastEngine, ReferenceEngine, check_fast_engine_valid
 from bench_sim.render.radiometry import airy_pixel_kernel, apply_psf, radiance_to_photons_factor
-from bench_sim.render.records import mitsuba_render_count
+from bench_sim.render.records import (
+    LightRecords,
+    cached_records,
+    light_records,
+    mitsuba_render_count,
+    records_key,
+)
 from bench_sim.render.texture import RunTexture, run_texture
 from bench_sim.rig.geometry import RigGeometry, rig_geometry
-from bench_sim.runtime.backend import BackendChoice, init_mitsuba
+from bench_sim.runtime.backend import BackendChoice, init_mitsuba, select_backend
 
-__all__ = ["RenderSetup", "prepare", "iter_photon_frames", "render_photons"]
+__all__ = ["RenderSetup", "prepare", "iter_photon_frames", "render_photons", "fast_records", "records_group"]
 
 
 @dataclass
@@ -42,6 +52,50 @@ class RenderSetup:
     frames: int
     seed: int
     info: dict[str, Any] = field(default_factory=dict)
+
+
+def _mode(cfg: BenchConfig) -> str:
+    return "spectral" if cfg.render.spectral else "mono"
+
+
+def _mitsuba(cfg: BenchConfig) -> tuple[Any, BackendChoice]:
+    return init_mitsuba(cfg.render.variant, _mode(cfg))
+
+
+def _backend(cfg: BenchConfig, engine: str) -> tuple[Any, BackendChoice, LightRecords | None]:
+    """``(mitsuba, backend, records)`` of a pass: the fast engine whose records this process
+    holds already (rendered or installed) needs no Mitsuba at all (``mitsuba`` is ``None``; the
+    backend is chosen as :func:`~bench_sim.runtime.backend.init_mitsuba` would), else Mitsuba is
+    imported and its variant set (``records`` is ``None``)."""
+    if engine == "fast":
+        choice = select_backend(cfg.render.variant, _mode(cfg))
+        records = cached_records(cfg, choice.variant)
+        if records is not None:
+            return None, choice, records
+    mi, choice = _mitsuba(cfg)
+    return mi, choice, None
+
+
+def records_group(cfg: BenchConfig, engine: str | None = None) -> str | None:
+    """What the passes of ``cfg`` that can share one set of light records have in common (their
+    records' key before Mitsuba resolves its variant), or ``None`` when the pass renders with the
+    reference engine (no records). Computed from the config alone (no Mitsuba)."""
+    if (engine or cfg.render.engine) != "fast":
+        return None
+    return records_key(cfg, "requested")
+
+
+def fast_records(cfg: BenchConfig) -> LightRecords:
+    """The fast engine's light records of ``cfg``'s scene (from this process's cache, or
+    rendered now), ready to hand to other processes (:func:`bench_sim.render.records.install_records`).
+
+    A pass of any config of the same :func:`records_group` on the same machine then finds them
+    in its process's cache instead of rendering them.
+    """
+    check_fast_engine_valid(cfg)
+    mi, choice = _mitsuba(cfg)
+    rec, _ = light_records(mi, cfg, rig_geometry(cfg), choice.variant)
+    return rec.shareable()
 
 
 def prepare(
@@ -70,12 +124,12 @@ def prepare(
         raise BenchSimError(f"frames = {frames}: must be at least 1")
     if name == "fast":
         check_fast_engine_valid(cfg)
-    mi, choice = init_mitsuba(cfg.render.variant, "spectral" if cfg.render.spectral else "mono")
+    mi, choice, records = _backend(cfg, name)
     geom = rig_geometry(cfg)
     grid = run_texture(cfg, geom, first_frame, frames, rng)
     seed = int(rng.integers(0, 2**31 - 1))
     if name == "fast":
-        eng: Any = FastEngine(mi, cfg, geom, grid, seed, first_frame, variant=choice.variant)
+        eng: Any = FastEngine(mi, cfg, geom, grid, seed, first_frame, variant=choice.variant, records=records)
     else:
         eng = ReferenceEngine(mi, cfg, geom, grid, seed, first_frame)
     s, lens = cfg.sensor, cfg.lens

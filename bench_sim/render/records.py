@@ -28,6 +28,13 @@ Reuse
     of those inside one process cost one set of Mitsuba renders. :func:`mitsuba_render_count`
     counts every ``mi.render`` call made in the process.
 
+    Across processes (the workers of a sweep or a data set), the records of one key are made
+    once by one worker and handed to the others: :func:`bench_sim.render.exposures.fast_records`
+    makes them (a task of its own), :func:`install_records` puts them in the receiving process's
+    cache, where the fast engine finds them as if it had rendered them. They are the same arrays
+    either way (the renders use :data:`RECORD_SEED`, not the run's seed), so results do not
+    depend on which process rendered them.
+
 The records are rendered with a fixed sampler seed, not the run's: they are the engine's
 estimate of the scene's (deterministic) radiance, whose Monte Carlo error (about 1 % per pixel at
 16 spp x 4 x 4 records) is a fixed error of the renderer, the same for every run of the scene.
@@ -38,7 +45,7 @@ from __future__ import annotations
 import json
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -57,6 +64,8 @@ __all__ = [
     "reference_config",
     "records_key",
     "light_records",
+    "cached_records",
+    "install_records",
     "clear_record_cache",
 ]
 
@@ -174,6 +183,11 @@ class LightRecords:
     renders: int
     derived: dict[Any, Any] = field(default_factory=dict)
 
+    def shareable(self) -> LightRecords:
+        """These records without their derived quantities: the arrays (not copied) to hand to
+        another process, apart from this process's cached object (whose ``derived`` changes)."""
+        return replace(self, derived={})
+
 
 def _fill_in_closed_form(cfg: BenchConfig, name: str) -> bool:
     """A fill light (uniform environment of radiance ``L``) on the analytic drum, rendered mono:
@@ -245,6 +259,31 @@ def light_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, variant: str) ->
         while len(_cache) > CACHE_ENTRIES:
             _cache.popitem(last=False)
     return rec, True
+
+
+def cached_records(cfg: BenchConfig, variant: str) -> LightRecords | None:
+    """The records of ``cfg``'s scene for Mitsuba ``variant`` if this process's cache holds them
+    (rendered here or installed), else ``None``; Mitsuba is not needed to ask."""
+    key = records_key(cfg, variant)
+    with _lock:
+        rec = _cache.get(key)
+        if rec is not None:
+            _cache.move_to_end(key)
+        return rec
+
+
+def install_records(rec: LightRecords) -> bool:
+    """Put records made in another process (:meth:`LightRecords.shareable`) into this process's
+    cache under their key; the fast engine then finds them there. Returns False (and keeps the
+    cached set) when records of that key are there already."""
+    with _lock:
+        if rec.key in _cache:
+            _cache.move_to_end(rec.key)
+            return False
+        _cache[rec.key] = rec.shareable()
+        while len(_cache) > CACHE_ENTRIES:
+            _cache.popitem(last=False)
+    return True
 
 
 def clear_record_cache() -> None:

@@ -13,11 +13,20 @@ Plugin
     ``albedo(p, t) = T(y_material(theta(p), t0 + t), x)`` with bilinear interpolation, where
     ``theta(p) = atan2(-p.y, p.z)``, ``t0`` is the frame's start time (an opaque Dr.Jit scalar, so
     changing it reuses the compiled kernel) and ``t`` the ray's time in ``[0, t_int]`` (smear).
+
+Reuse
+    A target that is not drawn (no ``image`` or generated layout: the panel follows from
+    ``target.*`` alone) rasterises to the same texels on the same grid, so the rasterised blocks
+    of the last such grid are kept for the process (:data:`SHARED_GRIDS`): the next pass over it
+    (a sweep point that changes the lights, the sensor's noise, DTDI or fusion) reads them
+    instead of rasterising again. Each texel depends on its own centre only, so a block is the
+    same whichever pass made it.
 """
 
 from __future__ import annotations
 
 import functools
+import json
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -28,6 +37,7 @@ import numpy as np
 from bench_sim.config import BenchConfig
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.target import TargetPanel, make_panel, rasterize_at
+from bench_sim.rig.target_sources import MAP_LAYOUTS
 from bench_sim.runtime.parallel import parallel_map, thread_count
 
 __all__ = ["RunTexture", "run_texture", "drum_texture", "smear_filter", "ground_truth_reflectance"]
@@ -36,6 +46,8 @@ _MARGIN_PX = 6.0
 #: Texel rows per rasterised block, and blocks a texture keeps (least recently used dropped)
 BLOCK_ROWS = 256
 CACHE_BLOCKS = 12
+#: Grids of a target that is not drawn whose blocks the process keeps between passes
+SHARED_GRIDS = 1
 
 
 class _Blocks:
@@ -131,6 +143,24 @@ class RunTexture:
         return self._rasterize(0, self.n_rows)
 
 
+_shared_lock = threading.Lock()
+_shared: OrderedDict[str, _Blocks] = OrderedDict()
+
+
+def _blocks_for(cfg: BenchConfig, circumference_px: float, grid: tuple[float | int, ...]) -> _Blocks:
+    """The block cache of a grid: shared with the earlier passes over the same grid of the same
+    target when the target is not drawn (see the module docstring), else a new one."""
+    if cfg.target.layout in MAP_LAYOUTS:
+        return _Blocks()
+    key = json.dumps([cfg.target.model_dump(mode="json"), circumference_px, grid, BLOCK_ROWS])
+    with _shared_lock:
+        blocks = _shared.pop(key, None) or _Blocks()
+        _shared[key] = blocks
+        while len(_shared) > SHARED_GRIDS:
+            _shared.popitem(last=False)
+    return blocks
+
+
 def run_texture(
     cfg: BenchConfig, geom: RigGeometry, first_frame: int, frames: int, rng: np.random.Generator | None = None
 ) -> RunTexture:
@@ -154,9 +184,11 @@ def run_texture(
     circumference_px = 2 * np.pi * geom.radius_m / p
     panel = make_panel(cfg.target, circumference_px, rng)
     # panel coordinates: u = y / p (lines), v = x / p + columns / 2
+    v0_px, hu_px, hv_px = x_start / p + cfg.target.panel_columns / 2.0, h_y / p, h_x / p
+    blocks = _blocks_for(cfg, float(circumference_px), (a0, ny, nx, v0_px, hu_px, hv_px))
     return RunTexture(
-        a0 * h_y, h_y, x_start, h_x, q, panel, ny, nx,
-        v0_px=x_start / p + cfg.target.panel_columns / 2.0, hu_px=h_y / p, hv_px=h_x / p,
+        a0 * h_y, h_y, x_start, h_x, q, panel, ny, nx, v0_px=v0_px, hu_px=hu_px, hv_px=hv_px,
+        _blocks=blocks,
     )
 
 

@@ -14,6 +14,12 @@ each machine). One module serves both, so every experiment gets the same guarant
 - **Reuse inside a worker.** Worker processes live for the whole run; :func:`worker_cache` keeps
   expensive objects (Mitsuba scenes, compiled kernels, render records) between the tasks a worker
   runs, and the render module's own record cache is process-level too.
+- **Shared inputs made once per run.** A task may name :class:`Shared` inputs (a fast engine's
+  light records, a camera's measured dynamic range): each distinct one (by its key) is made
+  once for the whole run, as a task of its own scheduled before the tasks that need it, and
+  passed to them as extra arguments; Dask moves it to the worker that needs it (and prefers to
+  run a task where its inputs already are), so a run of ``n`` workers makes it once, not ``n``
+  times, and independent inputs are made side by side.
 - **Results as they complete.** :func:`run_tasks` calls ``on_result`` in the client process as
   each task finishes, so callers write each point or sample as soon as it is done and a killed
   run can be resumed.
@@ -43,6 +49,7 @@ from bench_sim.runtime.parallel import child_sequence
 
 __all__ = [
     "TaskOutcome",
+    "Shared",
     "task_seed_sequence",
     "task_generator",
     "open_client",
@@ -83,6 +90,43 @@ class TaskOutcome:
     @property
     def ok(self) -> bool:
         return self.error is None
+
+
+@dataclass(frozen=True)
+class Shared:
+    """An input that several tasks of a run need, made once per run (see the module docstring).
+
+    Attributes
+    ----------
+    key
+        Its identity: two ``Shared`` with the same key are the same input (made once).
+    func
+        A module-level (picklable) function of one argument that makes it; it must be a
+        deterministic function of ``arg``.
+    arg
+        Its argument.
+    """
+
+    key: str
+    func: Callable[[Any], Any]
+    arg: Any
+
+
+@dataclass(frozen=True)
+class _SharedError:
+    """What a shared input that failed is replaced by: the tasks that need it fail with ``error``."""
+
+    error: str
+
+
+def _make_shared(func: Callable[[Any], Any], arg: Any) -> Any:
+    """Make a shared input (in a worker); a failure becomes a :class:`_SharedError`."""
+    try:
+        return func(arg)
+    except Exception as exc:
+        if os.environ.get("BENCH_SIM_DEBUG") == "1":
+            traceback.print_exc()
+        return _SharedError(_one_line(exc))
 
 
 def task_seed_sequence(root_seed: int, index: int) -> np.random.SeedSequence:
@@ -127,8 +171,9 @@ def _one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {msg}" if msg else type(exc).__name__
 
 
-def _run_one(func: Callable[[Any], Any], index: int, arg: Any) -> TaskOutcome:
-    """Run one task, timing it and turning an exception into a one-line error."""
+def _run_one(func: Callable[..., Any], index: int, arg: Any, *shared: Any) -> TaskOutcome:
+    """Run one task (``func(arg, *shared)``), timing it and turning an exception into a one-line
+    error; a failed shared input fails the task with its error."""
     try:
         from distributed import get_worker
 
@@ -136,8 +181,11 @@ def _run_one(func: Callable[[Any], Any], index: int, arg: Any) -> TaskOutcome:
     except (ImportError, ValueError):
         where = "local"
     t0 = time.perf_counter()
+    failed = next((s for s in shared if isinstance(s, _SharedError)), None)
+    if failed is not None:
+        return TaskOutcome(index, None, failed.error, 0.0, where)
     try:
-        value = func(arg)
+        value = func(arg, *shared)
     except Exception as exc:  # a failed task is recorded and the run goes on
         if os.environ.get("BENCH_SIM_DEBUG") == "1":
             traceback.print_exc()
@@ -221,21 +269,23 @@ def _env_seconds(name: str, default: float) -> float:
 
 
 def run_tasks(
-    func: Callable[[Any], Any],
+    func: Callable[..., Any],
     args: Sequence[Any],
     *,
     client: Any,
     indices: Sequence[int] | None = None,
     on_result: Callable[[TaskOutcome], None] | None = None,
     keep_values: bool = True,
+    shared: Sequence[Sequence[Shared]] | None = None,
 ) -> list[TaskOutcome]:
-    """Run ``func(arg)`` for every ``arg`` and report each outcome as it completes.
+    """Run ``func(arg, *inputs)`` for every ``arg`` and report each outcome as it completes.
 
     Parameters
     ----------
     func
-        A module-level (picklable) function of one argument. It must derive all its randomness
-        from its argument (e.g. a seed from :func:`task_seed_sequence` carried in it).
+        A module-level (picklable) function of one argument and its shared inputs. It must
+        derive all its randomness from its argument (e.g. a seed from
+        :func:`task_seed_sequence` carried in it).
     args
         One argument per task.
     client
@@ -249,6 +299,9 @@ def run_tasks(
         Keep each task's value in the returned outcomes. ``False`` drops it once ``on_result``
         has seen it (``value`` is ``None``), so a run whose tasks return large arrays that
         ``on_result`` writes away holds one result at a time, however many tasks it has.
+    shared
+        Per task, the :class:`Shared` inputs it needs (passed to ``func`` after ``arg``, in
+        this order); each distinct key is made once for the run. Default: none.
 
     Returns
     -------
@@ -257,12 +310,16 @@ def run_tasks(
 
     Notes
     -----
-    Each task's result is released on its worker as soon as this process has it, so worker
-    memory does not grow with the number of tasks.
+    Each task's result is released on its worker as soon as this process has it, and each
+    shared input as soon as the last task that needs it is done, so worker memory does not
+    grow with the number of tasks.
     """
     idx = list(range(len(args))) if indices is None else [int(i) for i in indices]
     if len(idx) != len(args):
         raise BenchSimError(f"indices: {len(idx)} given for {len(args)} tasks")
+    needs = [tuple(s) for s in shared] if shared is not None else [()] * len(args)
+    if len(needs) != len(args):
+        raise BenchSimError(f"shared: {len(needs)} given for {len(args)} tasks")
     outcomes: dict[int, TaskOutcome] = {}
 
     def record(out: TaskOutcome) -> None:
@@ -271,12 +328,65 @@ def run_tasks(
         outcomes[out.index] = out if keep_values else dataclasses.replace(out, value=None)
 
     if client is None:
-        for i, arg in zip(idx, args, strict=True):
-            record(_run_one(func, i, arg))
+        _run_here(func, idx, args, needs, record)
         return [outcomes[i] for i in idx]
+    _run_on(client, func, idx, args, needs, record, outcomes)
+    return [outcomes[i] for i in idx]
+
+
+def _uses(needs: Sequence[tuple[Shared, ...]]) -> dict[str, int]:
+    """Key -> number of tasks that need that shared input."""
+    uses: dict[str, int] = {}
+    for need in needs:
+        for s in {s.key: s for s in need}.values():
+            uses[s.key] = uses.get(s.key, 0) + 1
+    return uses
+
+
+def _run_here(
+    func: Callable[..., Any], idx: list[int], args: Sequence[Any], needs: Sequence[tuple[Shared, ...]],
+    record: Callable[[TaskOutcome], None],
+) -> None:
+    """:func:`run_tasks` in this process: each shared input made when first needed, dropped
+    after its last task."""
+    uses = _uses(needs)
+    made: dict[str, Any] = {}
+    for i, arg, need in zip(idx, args, needs, strict=True):
+        for s in need:
+            if s.key not in made:
+                made[s.key] = _make_shared(s.func, s.arg)
+        record(_run_one(func, i, arg, *(made[s.key] for s in need)))
+        for key in {s.key for s in need}:
+            uses[key] -= 1
+            if uses[key] == 0:
+                del made[key]
+
+
+def _run_on(
+    client: Any, func: Callable[..., Any], idx: list[int], args: Sequence[Any],
+    needs: Sequence[tuple[Shared, ...]], record: Callable[[TaskOutcome], None],
+    outcomes: dict[int, TaskOutcome],
+) -> None:
+    """:func:`run_tasks` on a Dask client: the shared inputs first (at a higher priority), then
+    the tasks, each depending on the futures of its inputs."""
     from distributed import as_completed
 
-    pending = as_completed(client.map(_run_one, [func] * len(args), idx, list(args), pure=False))
+    uses = _uses(needs)
+    made: dict[str, Any] = {}
+    for need in needs:
+        for s in need:
+            if s.key not in made:
+                made[s.key] = client.submit(_make_shared, s.func, s.arg, pure=False, priority=1)
+    if made:
+        futures = [
+            client.submit(_run_one, func, i, arg, *(made[s.key] for s in need), pure=False)
+            for i, arg, need in zip(idx, args, needs, strict=True)
+        ]
+    else:
+        futures = client.map(_run_one, [func] * len(args), idx, list(args), pure=False)
+    task_needs = {fut.key: {s.key for s in need} for fut, need in zip(futures, needs, strict=True)}
+    pending = as_completed(futures)
+    del futures
     try:
         for fut in pending:  # only ``pending`` holds the futures not yet done
             try:
@@ -290,10 +400,13 @@ def run_tasks(
                     f"{len(outcomes)} of {len(idx)} tasks had finished"
                 ) from None
             fut.release()  # the worker may drop the result now
+            for key in task_needs.pop(fut.key, ()):
+                uses[key] -= 1
+                if uses[key] == 0:
+                    made.pop(key).release()  # no task needs it any more
             record(out)
     except BaseException:
         if getattr(client, "status", None) == "running":
             with contextlib.suppress(Exception):
-                client.cancel(list(pending.futures))
+                client.cancel([*pending.futures, *made.values()])
         raise
-    return [outcomes[i] for i in idx]

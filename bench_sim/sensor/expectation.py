@@ -61,6 +61,9 @@ __all__ = [
 CLIP_SIGMAS = 6.0
 #: Bound of the Edgeworth step's error on a clipped stage mean, in units of the stage's sd.
 EDGEWORTH_ERROR_BOUND_SD = 0.01
+#: Clips further than this many sd from a normal read leave its moments unchanged in float64
+#: (the tail mass beyond, ``Phi(-9) ~ 1e-19``, is below the resolution of ``1 + x``).
+_FAR_CLIP_SDS = 9.0
 #: Gauss-Legendre nodes per smooth piece of the ``z`` integral.
 _NODES = 12
 _Z_MAX = 6.5
@@ -154,14 +157,37 @@ def _cf_quantile(z: np.ndarray, lam: np.ndarray) -> np.ndarray:
 
 def _z_at(target: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """``z`` where :func:`_cf_quantile` reaches ``target`` (bisection; clipped to the quadrature's range)."""
-    lo = np.full(lam.shape, -_Z_MAX)
-    hi = np.full(lam.shape, _Z_MAX)
+    out = np.full(lam.shape, _Z_MAX)  # the quantile stays below the target over the whole range
+    out[_cf_quantile(np.full(lam.shape, -_Z_MAX), lam) >= target] = -_Z_MAX  # or above it
+    inside = _cf_quantile(np.full(lam.shape, _Z_MAX), lam) >= target
+    inside &= out > 0
+    lam_in, target_in = lam[inside], np.broadcast_to(target, lam.shape)[inside]
+    lo = np.full(lam_in.shape, -_Z_MAX)
+    hi = np.full(lam_in.shape, _Z_MAX)
     for _ in range(24):
         mid = 0.5 * (lo + hi)
-        below = _cf_quantile(mid, lam) < target
+        below = _cf_quantile(mid, lam_in) < target_in
         lo = np.where(below, mid, lo)
         hi = np.where(below, hi, mid)
-    return 0.5 * (lo + hi)
+    out[inside] = 0.5 * (lo + hi)
+    return out
+
+
+def _full_read_moments(
+    mu: np.ndarray, sd: float, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Raw moments of full-well reads ``clip(N(mu, sd^2), lo, hi)``: the normal's own
+    (``mu``, ``mu^2 + sd^2``, ``mu^3 + 3 mu sd^2``) where both clips lie more than
+    :data:`_FAR_CLIP_SDS` sd away (the clipped tails are below float64's resolution there), else
+    :func:`clipped_normal_moments`."""
+    far = (hi - mu > _FAR_CLIP_SDS * sd) & (mu - lo > _FAR_CLIP_SDS * sd)
+    var = sd * sd
+    m1, m2, m3 = mu.copy(), mu * mu + var, mu * (mu * mu + 3.0 * var)
+    if not np.all(far):
+        near = ~far
+        c1, c2, c3 = clipped_normal_moments(mu[near], sd, lo[near], hi[near])
+        m1[near], m2[near], m3[near] = c1, c2, c3
+    return m1, m2, m3
 
 
 def _integrate_reads(
@@ -173,6 +199,20 @@ def _integrate_reads(
     if not noisy or not np.any(lam > 0):
         e = np.minimum(lam + det_e, fw)
         return clipped_normal_moments(k * e + off, s, lo, hi)
+    # reads full at every node (the quantile at -_Z_MAX already reaches the full well; it rises
+    # with z where lam is that large): the integrand is constant, the read a clipped normal
+    full = lam + det_e >= fw  # (the quantile at -_Z_MAX lies below lam)
+    lowest = _cf_quantile(np.full(int(full.sum()), -_Z_MAX), lam[full])
+    full[full] = np.maximum(lowest, 0.0) + det_e[full] >= fw
+    if np.any(full):
+        m_full = _full_read_moments(k * fw + off[full], s, lo[full], hi[full])
+        rest = ~full
+        m_rest = _integrate_reads(lam[rest], det_e[rest], off[rest], rm, lo[rest], hi[rest], noisy) \
+            if np.any(rest) else (np.empty(0),) * 3
+        moments = tuple(np.empty(lam.shape) for _ in range(3))
+        for j in range(3):
+            moments[j][full], moments[j][rest] = m_full[j], m_rest[j]
+        return moments[0], moments[1], moments[2]
     # kinks in z: full well, mean at lo and at hi
     cuts = [_z_at(fw - det_e, lam), _z_at((lo - off) / k - det_e, lam), _z_at((hi - off) / k - det_e, lam)]
     fixed = [np.full(lam.shape, z) for z in (-_Z_MAX, -_Z_SPLIT, _Z_SPLIT, _Z_MAX)]

@@ -90,3 +90,37 @@ def test_fill_records_in_closed_form_equal_a_mitsuba_render(monkeypatch, lens):
     records.clear_record_cache()
     assert (s_closed.info["mitsuba_renders"], s_rendered.info["mitsuba_renders"]) == (2, 3)
     np.testing.assert_allclose(closed, rendered, rtol=1e-5, atol=1e-6 * float(rendered.mean()))
+
+
+def test_records_made_elsewhere_are_installed_and_give_identical_frames():
+    """Records made by :func:`fast_records` (what another worker hands over) and installed in
+    a fresh cache make no render, and the frames are bit for bit those of records rendered by
+    the pass itself; a sync error or a new light power does not change the records' group."""
+    from bench_sim.render.exposures import fast_records, records_group
+
+    cfg = _lights(128.0, 6.0)
+    records.clear_record_cache()
+    own, _ = _frames(cfg)
+    shipped = fast_records(cfg)  # from the cache: the same arrays, without the derived kernels
+    assert shipped.derived == {} and shipped.renders == 2
+    records.clear_record_cache()
+    assert records.install_records(shipped) and not records.install_records(shipped)
+    n0 = records.mitsuba_render_count()
+    installed, setup = _frames(cfg)
+    assert records.mitsuba_render_count() == n0 and setup.info["mitsuba_renders"] == 0
+    np.testing.assert_array_equal(installed, own)
+    assert records_group(cfg) == records_group(_lights(512.0, 1.0, timing={"sync_error": 0.01}))
+    assert records_group(cfg) != records_group(_lights(128.0, 6.0, render={"subpixels": 2}))
+    assert records_group(cfg, engine="reference") is None
+    records.clear_record_cache()
+
+
+def test_kernel_sets_kept_with_the_records_are_bounded():
+    """A drum speed per sample (sync error) makes a new kernel set each time; the records keep
+    only the last :data:`~bench_sim.render.engines.KERNEL_ENTRIES`."""
+    records.clear_record_cache()
+    for k in range(engines.KERNEL_ENTRIES + 2):
+        _, setup = _frames(_lights(128.0, 6.0, timing={"sync_error": 0.001 * k}), frames=2)
+    kept = [key for key in setup.engine.records.derived if key[0] == "kernels"]
+    assert len(kept) == engines.KERNEL_ENTRIES
+    records.clear_record_cache()

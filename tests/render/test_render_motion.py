@@ -158,3 +158,24 @@ def test_mesh_files_are_written_once_and_removed_at_exit(tmp_path):
                          cwd=Path(__file__).resolve().parents[2], check=True)
     assert out.stdout.strip() == "2"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_target_that_is_not_drawn_shares_its_rasterised_blocks_between_passes():
+    """Two passes over the same grid of a procedural target read one set of rasterised blocks
+    (equal to a fresh rasterisation); a drawn target (dead leaves) gets its own each time."""
+    from bench_sim.render import texture
+    from bench_sim.rig.geometry import rig_geometry
+
+    cfg = tiny_cfg()
+    geom = rig_geometry(cfg)
+    a = texture.run_texture(cfg, geom, FIRST, 8, np.random.default_rng(0))
+    rows = a.rows(0, a.n_rows)
+    b = texture.run_texture(tiny_cfg(lights={"strong": {"irradiance_w_m2": 7.0}}), geom, FIRST, 8,
+                            np.random.default_rng(1))
+    assert b._blocks is a._blocks and b.held_bytes == a.held_bytes > 0
+    np.testing.assert_array_equal(b.rows(0, b.n_rows), rows)
+    np.testing.assert_array_equal(b._rasterize(0, b.n_rows), rows)
+    leaves = tiny_cfg(target={"layout": "dead_leaves"})
+    c = texture.run_texture(leaves, geom, FIRST, 8, np.random.default_rng(0))
+    d = texture.run_texture(leaves, geom, FIRST, 8, np.random.default_rng(0))
+    assert c._blocks is not d._blocks

@@ -7,6 +7,7 @@ import pytest
 
 from bench_sim.errors import BenchSimError
 from bench_sim.runtime.execution import (
+    Shared,
     open_client,
     run_tasks,
     task_generator,
@@ -82,3 +83,38 @@ def test_unreachable_scheduler_is_one_line() -> None:
     with pytest.raises(BenchSimError, match=r"^--scheduler = 'tcp://127.0.0.1:9': cannot reach"):
         with open_client(scheduler="tcp://127.0.0.1:9", connect_timeout_s=2):
             pass
+
+
+def _offset(arg: int) -> int:
+    """A shared input: counts how often it is made (in this process)."""
+    _MADE.append(arg)
+    if arg < 0:
+        raise BenchSimError("negative offset refused")
+    return 1000 * arg
+
+
+_MADE: list[int] = []
+
+
+def _add(arg: int, *inputs: int) -> int:
+    """A task that adds its shared inputs to its argument."""
+    return arg + sum(inputs)
+
+
+def _shared_for(args: list[int]) -> list[tuple[Shared, ...]]:
+    """Even arguments share offset 0, odd ones offset 1; argument 5's offset fails."""
+    off = [-2 if a == 5 else a % 2 for a in args]
+    return [(Shared(f"offset {o}", _offset, o),) for o in off]
+
+
+def test_shared_inputs_made_once_per_key_in_and_out_of_dask() -> None:
+    args = [0, 1, 2, 3, 4, 5]
+    _MADE.clear()
+    here = run_tasks(_add, args, client=None, shared=_shared_for(args))
+    assert sorted(_MADE) == [-2, 0, 1]  # one per key, in this process
+    assert [o.value for o in here[:5]] == [0, 1001, 2, 1003, 4]
+    assert here[5].error == "BenchSimError: negative offset refused"  # its input failed: it fails
+    with open_client(workers=2) as client:
+        there = run_tasks(_add, args, client=client, shared=_shared_for(args))
+    assert [(o.value, o.error) for o in there] == [(o.value, o.error) for o in here]
+    assert all(o.ok for o in there[:5])

@@ -372,10 +372,10 @@ def test_a_failed_point_is_recorded_and_the_sweep_goes_on(
 
     real = sweep.measure_point
 
-    def flaky(task):
+    def flaky(task, *inputs):
         if task.index == 2:
             raise MemoryError("worker ran out of memory\nsecond line")
-        return real(task)
+        return real(task, *inputs)
 
     monkeypatch.setattr(sweep, "measure_point", flaky)
     out = tmp_path / "flaky"

@@ -22,7 +22,10 @@ Steps of :func:`run_dataset`:
    ``samples/NNNNNNNN.json`` (status ``complete``). A killed run leaves at worst a sample whose
    chunks are written but whose record is not: it counts as not done, and ``--resume`` redoes
    it. A failed sample gets a ``failed`` record with its one-line error and is retried by
-   ``--resume``.
+   ``--resume``. The fast engine's light records are made once per distinct scene for the
+   whole run (a task of their own, :func:`bench_sim.render.exposures.fast_records`) and handed
+   to every sample that needs them: the drawn powers, sync error and target change no record,
+   so a data set like the example renders its records once, not once per worker.
 4. **Summarise**: the manifest (rebuilt from the records, also every 10 s during the run),
    the dataset card and its thumbnail sheet, and, when every sample is complete, the completion
    record, written last.
@@ -46,7 +49,9 @@ from bench_sim.io import check_free_space, format_bytes, write_json
 from bench_sim.io.folder_lock import folder_lock
 from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
 from bench_sim.pipeline import run_pass
-from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
+from bench_sim.render.exposures import fast_records, records_group
+from bench_sim.render.records import LightRecords, install_records
+from bench_sim.runtime.execution import Shared, TaskOutcome, open_client, run_tasks
 from bench_sim.runtime.progress import ProgressBar, progress_bar
 from bench_sim.sensor.model import stage_mean_var_dn
 from bench_sim.workflows.dataset.card import write_card
@@ -80,6 +85,7 @@ __all__ = [
     "SampleOutput",
     "DatasetRun",
     "make_sample",
+    "sample_inputs",
     "sample_metrics",
     "bytes_per_sample",
     "estimate_bytes",
@@ -149,8 +155,24 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
     return out
 
 
-def make_sample(task: SampleTask) -> SampleOutput:
-    """Make one sample (runs in a worker): one pass with truth, its arrays and metrics."""
+def sample_inputs(tasks: Sequence[SampleTask]) -> list[tuple[Shared, ...]]:
+    """The shared inputs of each sample: the light records of its scene (none for the reference
+    engine), one :class:`~bench_sim.runtime.execution.Shared` per distinct scene."""
+    out: list[tuple[Shared, ...]] = []
+    for t in tasks:
+        group = records_group(t.config)
+        out.append(() if group is None else (Shared("records:" + group, fast_records, t.config),))
+    return out
+
+
+def make_sample(task: SampleTask, records: LightRecords | None = None) -> SampleOutput:
+    """Make one sample (runs in a worker): one pass with truth, its arrays and metrics.
+
+    ``records``: the light records of its scene made by another task (:func:`sample_inputs`),
+    put in this process's cache for the pass; without them the pass finds them in the cache or
+    renders them."""
+    if records is not None:
+        install_records(records)
     camera = None if task.camera_seed is None else fixed_camera(task.config, task.camera_seed)
     res = run_pass(task.config, task.stages, np.random.default_rng(task.stream), truth=True,
                    fixed_pattern=camera)
@@ -291,7 +313,7 @@ def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool)
         writer = _SampleWriter(plan.out, spec, plan.values, meta, bar)
         try:
             run_tasks(make_sample, tasks, client=client, indices=todo, keep_values=False,
-                      on_result=writer.write)
+                      on_result=writer.write, shared=sample_inputs(tasks))
         except BaseException:
             write_manifest(plan.out, spec, meta, plan.values)  # what is on disk now
             raise

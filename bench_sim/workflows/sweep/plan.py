@@ -131,7 +131,8 @@ COLUMNS["tdi_light_ratio_p99"] = ("1", SCENE, "99th percentile of the TDI-window
 RATIO_DOC = ("1", SCENE, "irradiance of the spec's ratio lights, first / second (empty unless both emit)")
 #: Banding columns (one per flickering light and stage): ``banding_<light>_stage_<m>``.
 BANDING_DOC = ("1", SCENE, "flicker banding along the track: amplitude at the light's frequency "
-               "relative to the mean, of the stage's illumination profile")
+               "relative to the mean, of the stage's noise-free illumination on the flat-target pixels "
+               "(bench_sim.metrics.banding.flat_banding; NaN on a target without flat areas)")
 #: The journal's folder in ``DIR``: one ``NNNNNN.json`` record per finished point
 JOURNAL = "points"
 
@@ -155,6 +156,7 @@ class PointTask:
     banding_stages: tuple[int, ...] = ()  # the spec's stages (points_images.csv)
     ratio: tuple[str, str] | None = None  # the spec's light pair (light_ratio)
     images_dir: str | None = None  # keep_images: DIR/images (bench_sim.workflows.sweep.point_images)
+    count_records: bool = False  # its mitsuba_renders counts its shared records' renders (run.py)
 
 
 @dataclass(frozen=True)

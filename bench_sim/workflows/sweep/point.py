@@ -5,10 +5,13 @@ metrics (:mod:`bench_sim.measure.pass_metrics`), the measured dynamic range thro
 (:mod:`bench_sim.measure.chain_dr`) and the flicker banding per stage.
 
 The dynamic range through the chain is a property of the camera (sensor, timing, DTDI, the
-fused stages), not of the lights or the target: each worker measures it once per camera
-(:func:`bench_sim.runtime.execution.worker_cache`) on the sweep's root stream
-``SeedSequence(seed)`` (the points draw from its children), so every point with the same
-camera reports the same numbers, whichever worker ran it.
+fused stages), not of the lights or the target: it is measured once per distinct camera for the
+whole sweep (:func:`point_inputs`: a shared input of the execution layer,
+:class:`bench_sim.runtime.execution.Shared`, made by :func:`camera_dr` on the sweep's root
+stream ``SeedSequence(seed)``; the points draw from its children), so every point with the same
+camera reports the same numbers, whichever worker ran it. The fast engine's light records are
+shared the same way: rendered once per distinct scene (:func:`bench_sim.render.exposures.fast_records`)
+and installed in the process of each point that needs them.
 """
 
 from __future__ import annotations
@@ -25,16 +28,18 @@ from bench_sim.measure.chain_dr import measure_chain_dynamic_range
 from bench_sim.measure.fusion_scores import fusion_scores
 from bench_sim.measure.pass_metrics import pass_metrics
 from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges
-from bench_sim.metrics.banding import banding_amplitude, folded_cycles_per_line, illumination_profile
+from bench_sim.metrics.banding import folded_cycles_per_line
 from bench_sim.pipeline import run_pass
-from bench_sim.runtime.execution import task_seed_sequence, worker_cache
+from bench_sim.render.exposures import fast_records, records_group
+from bench_sim.render.records import LightRecords, install_records
+from bench_sim.runtime.execution import Shared, task_seed_sequence, worker_cache
 from bench_sim.sensor.model import stage_offset_dn
-from bench_sim.workflows.sweep.bands import banding_rows
+from bench_sim.workflows.sweep.bands import banding_rows, stage_banding
 from bench_sim.workflows.sweep.light_keys import light_ratio
 from bench_sim.workflows.sweep.plan import IMAGES, TRUTH_REGIONS, TRUTH_RULES, PointTask, banding_column
 from bench_sim.workflows.sweep.point_images import write_point_images
 
-__all__ = ["measure_point"]
+__all__ = ["measure_point", "point_inputs", "camera_dr"]
 
 
 def _camera_key(cfg: BenchConfig, root_seed: int, dr_levels: int) -> str:
@@ -50,13 +55,38 @@ def _camera_key(cfg: BenchConfig, root_seed: int, dr_levels: int) -> str:
     return "sweep-chain-dr:" + json.dumps(part, sort_keys=True)
 
 
-def _camera_dr(cfg: BenchConfig, root_seed: int, dr_levels: int) -> Any:
-    return worker_cache(
-        _camera_key(cfg, root_seed, dr_levels),
-        lambda: measure_chain_dynamic_range(
-            cfg, np.random.SeedSequence(root_seed), n_levels=dr_levels, columns=min(64, cfg.sensor.columns)
-        ),
+def camera_dr(arg: tuple[BenchConfig, int, int]) -> Any:
+    """The measured dynamic range through the chain of the camera of ``(cfg, root_seed,
+    dr_levels)`` (:func:`~bench_sim.measure.chain_dr.measure_chain_dynamic_range` on
+    ``SeedSequence(root_seed)``): a shared input of the points of that camera."""
+    cfg, root_seed, dr_levels = arg
+    return measure_chain_dynamic_range(
+        cfg, np.random.SeedSequence(root_seed), n_levels=dr_levels, columns=min(64, cfg.sensor.columns)
     )
+
+
+def _camera_dr(cfg: BenchConfig, root_seed: int, dr_levels: int) -> Any:
+    """:func:`camera_dr`, cached in this process (a point run without its shared input)."""
+    key = _camera_key(cfg, root_seed, dr_levels)
+    return worker_cache(key, lambda: camera_dr((cfg, root_seed, dr_levels)))
+
+
+def point_inputs(tasks: list[PointTask]) -> tuple[list[tuple[Shared, ...]], set[int]]:
+    """The shared inputs of each point (its light records, then its camera's DR; see the module
+    docstring) and the points that count the records' Mitsuba renders (the first point, by
+    index, of each record set: the renders are made once for all of them)."""
+    shared: list[tuple[Shared, ...]] = []
+    first: dict[str, int] = {}
+    for t in tasks:
+        group = records_group(t.cfg)
+        camera = (t.cfg, t.root_seed, t.dr_levels)
+        dr = Shared(_camera_key(*camera), camera_dr, camera)
+        if group is None:
+            shared.append((dr,))
+            continue
+        first[group] = min(first.get(group, t.index), t.index)
+        shared.append((Shared("records:" + group, fast_records, t.cfg), dr))
+    return shared, set(first.values())
 
 
 def _renders(setup: Any) -> int:
@@ -125,10 +155,7 @@ def _banding_columns(task: PointTask, ds: Any) -> dict[str, float]:
         for m in task.stages:
             amp = float("nan")
             if light.flickers and light.emits:
-                profile = illumination_profile(
-                    ds["photons"].sel(stage=m).values, ds["reflectance"].sel(stage=m).values
-                )
-                amp = banding_amplitude(profile, nu)
+                amp = stage_banding(cfg, ds, m, nu).amplitude  # on the flat-target pixels: no target floor
             rec[banding_column(name, m)] = amp
     return rec
 
@@ -150,14 +177,22 @@ def _sharpness_columns(cfg: BenchConfig, ds: Any) -> dict[str, float | None]:
     return {k: (None if v is not None and math.isnan(v) else v) for k, v in rec.items()}
 
 
-def measure_point(task: PointTask) -> dict[str, Any]:
+def measure_point(task: PointTask, *inputs: Any) -> dict[str, Any]:
     """Run the chain for one point and return its flat record
     (:data:`~bench_sim.workflows.sweep.plan.COLUMNS` and banding).
 
     The pass draws from ``task_seed_sequence(root_seed, stream)``; the camera DR from the root
-    ``SeedSequence(root_seed)``, cached per camera in the worker.
+    ``SeedSequence(root_seed)``. ``inputs`` are the point's shared inputs
+    (:func:`point_inputs`: its light records, if any, then its camera's DR); without them the
+    records come from this process's cache or are rendered, and the DR is measured once per
+    camera in this process. With ``task.count_records`` the point's ``mitsuba_renders`` counts
+    the renders that made its shared records.
     """
     cfg = task.cfg
+    records = next((x for x in inputs if isinstance(x, LightRecords)), None)
+    if records is not None:
+        install_records(records)
+    dr = next((x for x in inputs if not isinstance(x, LightRecords)), None)
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
     rng = np.random.default_rng(task_seed_sequence(task.root_seed, task.stream))
     sim = run_pass(cfg, task.stages, rng, truth=True)
@@ -166,9 +201,10 @@ def measure_point(task: PointTask) -> dict[str, Any]:
         sim.stage_dn[mu1], sim.stage_dn[mu2], mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=offsets
     )
     pm = pass_metrics(cfg, sim, fused)
-    rec = _camera_columns(_camera_dr(cfg, task.root_seed, task.dr_levels))
+    rec = _camera_columns(dr if dr is not None else _camera_dr(cfg, task.root_seed, task.dr_levels))
     rec.update(_scene_columns(pm))
-    rec["mitsuba_renders"] = _renders(sim.setup)
+    shared_renders = records.renders if records is not None and task.count_records else 0
+    rec["mitsuba_renders"] = _renders(sim.setup) + shared_renders
     lights = cfg.lights
     if lights.strong.emits and lights.weak.emits:
         rec["spot_fill_ratio"] = lights.strong.irradiance_w_m2 / lights.weak.irradiance_w_m2

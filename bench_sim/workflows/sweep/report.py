@@ -106,7 +106,8 @@ def _head(
         f"**{len(spec.points)} points**: {len(ok)} ok, {len(failed)} failed; "
         f"{renders} Mitsuba renders in all "
         f"({renders / max(len(ok), 1):.2g} per point: a light-power or flicker sweep on the fast engine "
-        "renders each light once per worker and forms every frame as a weighted sum). "
+        "renders each light once per distinct scene for the whole run and forms every frame as a "
+        "weighted sum). "
         f"Runs: {len(sessions)} ({sum(1 for s in sessions if s.get('resumed'))} resumed).",
         "",
         "## What was swept",

@@ -18,10 +18,15 @@ Plan -> run -> write:
 
 Reuse
 -----
-Worker processes live for the whole sweep, so the render module's caches (Mitsuba scenes,
-compiled kernels, light records) serve every point they run, and the camera's measured dynamic
-range is measured once per camera and worker; each point reports the Mitsuba renders its pass
-made (``mitsuba_renders``) and ``sweep.json`` their total.
+What the points have in common is made once for the whole sweep, whatever the number of
+workers (:func:`~bench_sim.workflows.sweep.point.point_inputs`, shared inputs of the execution
+layer): the fast engine's light records once per distinct scene (a light's power or flicker,
+the target, the sensor's noise, DTDI or fusion change no record) and the camera's measured
+dynamic range once per distinct camera, each as a task of its own that runs beside the others
+and is handed to the points that need it. Worker processes live for the whole sweep, so the
+render module's caches (Mitsuba, compiled kernels) serve every point they run. Each point
+reports the Mitsuba renders made for it (``mitsuba_renders``: its pass's, plus its shared
+records' for the first point, by index, that uses them) and ``sweep.json`` their total.
 
 Output folder
 -------------
@@ -38,7 +43,7 @@ import json
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +68,7 @@ from bench_sim.workflows.sweep.plan import (
     read_points,
     spec_sha256,
 )
-from bench_sim.workflows.sweep.point import measure_point
+from bench_sim.workflows.sweep.point import measure_point, point_inputs
 from bench_sim.workflows.sweep.report import write_outputs, write_points_csv
 
 __all__ = [
@@ -205,7 +210,10 @@ def _run_points(
                 on_point(rec)
             bar.advance()
 
-        run_tasks(measure_point, todo, client=client, indices=[t.index for t in todo], on_result=done)
+        shared, counting = point_inputs(todo)
+        args = [replace(t, count_records=t.index in counting) for t in todo]
+        run_tasks(measure_point, args, client=client, indices=[t.index for t in todo], on_result=done,
+                  shared=shared)
 
 
 def _totals(plan: SweepPlan, records: dict[int, dict[str, Any]]) -> dict[str, Any]:
