@@ -373,8 +373,13 @@ def _huge_npy(folder: Path) -> Path:
 
 HUGE: list[tuple[str, list[str], str, list[str]]] = [
     ("render 10^8 frames", ["render", "{cfg}", "--frames", "100000000"], "", ["not enough memory", "frames"]),
+    # the Zarr store is written while the pass runs: memory fits, the disk does not
     ("simulate 10^6 lines x 16384", ["simulate", "{cfg}"], "lines = 1000000\n[sensor]\ncolumns = 16384\n"
-     "[target]\npanel_columns = 16384\n[drum]\nlength_m = 4.0\n", ["not enough memory", "lines (1000000)"]),
+     "[target]\npanel_columns = 16384\n[drum]\nlength_m = 4.0\n", ["TiB", "free space", "lines (1000000)"]),
+    # NetCDF is written from memory: every stage image must fit first
+    ("simulate 10^6 lines x 16384 to NetCDF", ["simulate", "{cfg}", "--format", "netcdf"],
+     "lines = 1000000\n[sensor]\ncolumns = 16384\n[target]\npanel_columns = 16384\n[drum]\nlength_m = 4.0\n",
+     ["not enough memory", "lines (1000000)"]),
     ("65536^2 paper panel", ["render", "{cfg}"], "[target]\npanel_lines = 65536\npanel_columns = 65536\n",
      ["not enough memory", "target text bitmap"]),
     ("65536^2 dead leaves", ["simulate", "{cfg}"],

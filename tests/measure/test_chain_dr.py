@@ -60,13 +60,18 @@ def test_gain_over_gamma1_is_the_read_noise_ratio(dr12: ChainDR) -> None:
     """Over Gamma1 the HDR gains only at the dark end: the read noise of the digital sum grows as
     sqrt(m), so about 10 lg(mu2/mu1) = 9 dB, and it agrees with the sensor model's prediction."""
     model_gain = dr12.model_dr_db["gamma_hdr"] - dr12.model_dr_db["gamma1"]
-    assert dr12.gain_over_gamma1_db == pytest.approx(model_gain, abs=0.5)
+    # the measured SNR = 1 points (the dark end, where this gain is made) scatter with the seed:
+    # over seeds 0-9 the gain is 9.09 +- 0.26 dB (single-normal sampler) and 9.16 +- 0.30 dB
+    # (Box-Muller normals), model 9.10 dB; 0.9 dB is 3 sigma
+    assert dr12.gain_over_gamma1_db == pytest.approx(model_gain, abs=0.9)
     assert dr12.gain_over_gamma1_db == pytest.approx(10 * math.log10(MU2 / MU1), abs=1.0)
     for name in ("gamma1", "gamma2", "gamma_hdr"):
         # the model's clip is where the linear response meets the plateau (extrapolated point);
-        # EMVA's variance maximum lies a little below it
+        # EMVA's variance maximum lies a little below it. The SNR = 1 point scatters with the seed:
+        # over seeds 0-9 extrapolated - model is -0.04 +- 0.23 dB (Gamma1), 0.03 +- 0.20 dB (Gamma2,
+        # Gamma_HDR), so 0.75 dB is over 3 sigma
         img = dr12.images[name]
-        assert img.dr_db_extrapolated == pytest.approx(dr12.model_dr_db[name], abs=0.3), name
+        assert img.dr_db_extrapolated == pytest.approx(dr12.model_dr_db[name], abs=0.75), name
         assert dr12.model_dr_db[name] - 1.0 < img.dr_db < img.dr_db_extrapolated, name
 
 
