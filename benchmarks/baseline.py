@@ -114,6 +114,34 @@ def median(values: Sequence[float]) -> float:
     return float(statistics.median(values))
 
 
+def first_record_s(folder: Path, started: float) -> float:
+    """Seconds from ``started`` (epoch [s]) to the first JSON record in ``folder`` (a run's first
+    finished point or sample); NaN without any."""
+    stamps = [p.stat().st_mtime for p in folder.glob("*.json")]
+    return min(stamps) - started if stamps else float("nan")
+
+
+def print_rates(sides: Sequence[Side], times: dict[str, list[tuple[float, float]]],
+                first: dict[str, list[float]], n: int, unit: str,
+                extra: tuple[str, dict[str, int]] | None = None) -> None:
+    """The medians of paired runs of ``n`` ``unit`` each: wall, CPU, ``unit`` per minute, the
+    time to the first one, an ``extra`` column (name, value per side), and the ratio of rates."""
+    head = f"  {'side':<22} {'wall s':>7} {'CPU s':>7} {unit + '/min':>12} {'first ' + unit[:-1] + ' s':>15}"
+    print(head + (f" {extra[0]:>8}" if extra else "") + f"   (medians of {len(times[sides[0].name])})")
+    rate = {}
+    for side in sides:
+        wall = median([t[0] for t in times[side.name]])
+        cpu = median([t[1] for t in times[side.name]])
+        rate[side.name] = 60.0 * n / wall
+        row = (f"  {side.name:<22} {wall:7.1f} {cpu:7.1f} {rate[side.name]:12.2f} "
+               f"{median(first[side.name]):15.1f}")
+        print(row + (f" {extra[1][side.name]:8d}" if extra else ""))
+    if len(sides) == 2:
+        ratio = rate[sides[0].name] / rate[sides[1].name]
+        print(f"  {unit} per minute, this checkout / baseline: {ratio:.2f}")
+    print(f"  {load_line()} (at the end; CPU s: the process and its workers, user + system)")
+
+
 def load_line() -> str:
     """The 1, 5 and 15 minute load averages and the number of CPUs, one line."""
     one, five, fifteen = os.getloadavg()

@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baseline import Side, add_baseline_args, load_line, median, paired  # noqa: E402
+from baseline import Side, add_baseline_args, first_record_s, load_line, paired, print_rates  # noqa: E402
 
 from bench_sim.config import SCENES_DIR  # noqa: E402
 from bench_sim.workflows.dataset.reader import read_records  # noqa: E402
@@ -65,29 +65,6 @@ def _rss_series(samples: int) -> None:
                 print(f"after {i + 1:4d} samples: resident {mib:6.0f} MiB", flush=True)
 
 
-def _first_record_s(folder: Path, started: float) -> float:
-    """Seconds from ``started`` (epoch [s]) to the first sample record in ``folder``."""
-    stamps = [p.stat().st_mtime for p in folder.glob("*.json")]
-    return min(stamps) - started if stamps else float("nan")
-
-
-def _report(sides: list[Side], times: dict[str, list[tuple[float, float]]], first: dict[str, list[float]],
-            n: int, repeat: int) -> None:
-    print(f"  {'side':<22} {'wall s':>7} {'CPU s':>7} {'samples/min':>11} {'first sample s':>14}"
-          f"   (medians of {repeat})")
-    rate = {}
-    for side in sides:
-        wall = median([t[0] for t in times[side.name]])
-        cpu = median([t[1] for t in times[side.name]])
-        rate[side.name] = 60.0 * n / wall
-        print(f"  {side.name:<22} {wall:7.1f} {cpu:7.1f} {rate[side.name]:11.2f} "
-              f"{median(first[side.name]):14.1f}")
-    if len(sides) == 2:
-        ratio = rate[sides[0].name] / rate[sides[1].name]
-        print(f"  samples per minute, this checkout / baseline: {ratio:.2f}")
-    print(f"  {load_line()} (at the end; CPU s: the process and its workers, user + system)")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=6)
@@ -117,7 +94,7 @@ def main() -> None:
         done = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
         if done != n:
             raise RuntimeError(f"{side.name}: {done} of {n} samples complete")
-        first[side.name].append(_first_record_s(out / "samples", started))
+        first[side.name].append(first_record_s(out / "samples", started))
         print(f"  {side.name:<22} run {i}: {wall:6.1f} s wall, {cpu:6.1f} s CPU, first sample after "
               f"{first[side.name][-1]:5.1f} s ({load_line()})", flush=True)
         return wall, cpu
@@ -126,7 +103,7 @@ def main() -> None:
           f"each run a bench-sim process; {load_line()}", flush=True)
     try:
         times = paired(sides, run, a.repeat)
-        _report(sides, times, first, n, a.repeat)
+        print_rates(sides, times, first, n, "samples")
         store = tmp / "a_0" / "data.zarr"
         on_disk = sum(f.stat().st_size for f in store.rglob("*") if f.is_file())
         raw = bytes_per_sample(2, 256, 256, True)

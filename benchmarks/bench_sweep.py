@@ -34,7 +34,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baseline import Side, add_baseline_args, load_line, median, paired  # noqa: E402
+from baseline import Side, add_baseline_args, first_record_s, load_line, paired, print_rates  # noqa: E402
 
 from bench_sim.config import SCENES_DIR  # noqa: E402
 
@@ -47,12 +47,6 @@ seed = 0
 key = "lights.strong.irradiance_w_m2"
 logspace = {{ start = 8.0, stop = {stop}, num = {points} }}
 """
-
-
-def first_record_s(folder: Path, started: float) -> float:
-    """Seconds from ``started`` (epoch [s]) to the first journal record in ``folder``."""
-    stamps = [p.stat().st_mtime for p in folder.glob("*.json")]
-    return min(stamps) - started if stamps else float("nan")
 
 
 def main() -> None:
@@ -95,19 +89,7 @@ def main() -> None:
     finally:
         if a.keep is None:
             shutil.rmtree(tmp, ignore_errors=True)
-    print(f"  {'side':<22} {'wall s':>7} {'CPU s':>7} {'points/min':>10} {'first point s':>13} "
-          f"{'renders':>7}   (medians of {a.repeat})")
-    rate = {}
-    for side in sides:
-        wall = median([t[0] for t in times[side.name]])
-        cpu = median([t[1] for t in times[side.name]])
-        rate[side.name] = 60.0 * a.points / wall
-        print(f"  {side.name:<22} {wall:7.1f} {cpu:7.1f} {rate[side.name]:10.2f} "
-              f"{median(first[side.name]):13.1f} {renders[side.name]:7d}")
-    if len(sides) == 2:
-        ratio = rate[sides[0].name] / rate[sides[1].name]
-        print(f"  points per minute, this checkout / baseline: {ratio:.2f}")
-    print(f"  {load_line()} (at the end; CPU s: the process and its workers, user + system)")
+    print_rates(sides, times, first, a.points, "points", ("renders", renders))
 
 
 if __name__ == "__main__":
