@@ -60,6 +60,7 @@ from bench_sim.errors import BenchSimError
 __all__ = [
     "SFRResult",
     "edge_sfr",
+    "check_roi_bounds",
     "mtf50",
     "mtf_at",
     "OVERSAMPLING",
@@ -168,12 +169,21 @@ def _check_roi(shape: tuple[int, ...], roi: tuple[int, int, int, int] | None) ->
         x0, y0, x1, y1 = (int(v) for v in roi)
     except (TypeError, ValueError):
         raise BenchSimError(f"roi = {roi!r}: expected four integers x0, y0, x1, y1") from None
-    if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
+    return check_roi_bounds((x0, y0, x1, y1), w, h, f"roi = {x0},{y0},{x1},{y1}")
+
+
+def check_roi_bounds(
+    box: tuple[int, int, int, int], width: int, height: int, given: str
+) -> tuple[int, int, int, int]:
+    """``box = (x0, y0, x1, y1)`` [pixels, ends exclusive] inside a ``width`` x ``height`` image;
+    else one error line that starts with ``given`` (how the caller names the ROI)."""
+    x0, y0, x1, y1 = box
+    if not (0 <= x0 < x1 <= width and 0 <= y0 < y1 <= height):
         raise BenchSimError(
-            f"roi = {x0},{y0},{x1},{y1}: must satisfy 0 <= x0 < x1 <= {w} and 0 <= y0 < y1 <= {h} "
-            f"(the image is {w} x {h} pixels; ends exclusive)"
+            f"{given}: must satisfy 0 <= x0 < x1 <= {width} and 0 <= y0 < y1 <= {height} "
+            f"(the image is {width} x {height} pixels; ends exclusive)"
         )
-    return x0, y0, x1, y1
+    return box
 
 
 def _orient(a: np.ndarray) -> tuple[np.ndarray, str]:

@@ -44,7 +44,7 @@ from bench_sim.io import (
     write_figure_png,
     write_json,
 )
-from bench_sim.metrics.sfr import SFRResult, edge_sfr
+from bench_sim.metrics.sfr import SFRResult, check_roi_bounds, edge_sfr
 from bench_sim.version import __version__
 
 __all__ = ["parse_roi", "auto_saturation", "run_mtf", "summary_line", "OUTPUT_FILES"]
@@ -64,12 +64,7 @@ def parse_roi(text: str | None, shape: tuple[int, ...]) -> tuple[int, int, int, 
         x0, y0, x1, y1 = (int(v) for v in text.split(","))
     except ValueError:
         raise BenchSimError(f"--roi = {text!r}: expected four integers x0,y0,x1,y1 (pixel indices)") from None
-    if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
-        raise BenchSimError(
-            f"--roi = {text!r}: must satisfy 0 <= x0 < x1 <= {w} and 0 <= y0 < y1 <= {h} "
-            f"(the image is {w} x {h} pixels; ends exclusive)"
-        )
-    return x0, y0, x1, y1
+    return check_roi_bounds((x0, y0, x1, y1), w, h, f"--roi = {text!r}")
 
 
 def auto_saturation(roi_pixels: np.ndarray) -> float | None:
