@@ -46,7 +46,6 @@ if TYPE_CHECKING:  # scipy is imported where the matrices are built (it costs st
 __all__ = [
     "RowFootprints",
     "row_footprints",
-    "stage_reflectance",
     "stages_reflectance",
     "reflectance_rows",
     "StageSums",
@@ -156,7 +155,7 @@ def row_footprints(cfg: BenchConfig, geom: RigGeometry, grid: RunTexture, rows: 
 
 
 def reflectance_rows(fp: RowFootprints, q: int, stage: int, line0: int, line1: int) -> tuple[int, int]:
-    """Texture grid rows ``(r0, r1)`` that :func:`stage_reflectance` reads for stage ``m`` and
+    """Texture grid rows ``(r0, r1)`` that :func:`stages_reflectance` reads for stage ``m`` and
     lines ``line0 .. line1 - 1`` (a stage reads the rows of every lower stage too)."""
     m = int(stage)
     starts = [int(fp.y_base[i]) + i * q for i in range(m)]
@@ -164,67 +163,34 @@ def reflectance_rows(fp: RowFootprints, q: int, stage: int, line0: int, line1: i
     return int(line0) * q + min(starts), (int(line1) - 1) * q + max(ends)
 
 
-def stage_reflectance(
-    values: np.ndarray, q: int, fp: RowFootprints, stage: int, line0: int, line1: int, row0: int = 0
+def stages_reflectance(
+    values: np.ndarray, q: int, fp: RowFootprints, stages: Sequence[int], line0: int, line1: int,
+    row0: int = 0,
 ) -> np.ndarray:
-    """Reflectance integrated by stage-``m`` pixels of scene lines ``line0 .. line1 - 1``.
+    """Reflectance integrated by the stage-``m`` pixels of scene lines ``line0 .. line1 - 1``, for
+    every ``m`` in ``stages``: (S, line1 - line0, N) float64, 0..1.
 
     ``rho_m[j, n] = (1/m) sum_{i < m} <footprint of row i in frame j + i, texture>``: row ``i``
     reads line ``j`` in frame ``j + i`` (eq. 1-2), when its footprint sits ``(j + i) q`` texel
-    rows further along the grid than in frame 0.
+    rows further along the grid than in frame 0. The texture is projected across the track first
+    (one sparse product per across-track matrix: ``P_g = values X_g^T``, (rows, N)); the stages
+    then grow row by row, ``m rho_m = (m' rho_m') + sum_{m' <= i < m} <along-track footprint of
+    row i, P_g(i)>`` between consecutive requested stages ``m' < m``, the rows of one group
+    sharing one summed kernel.
 
     Parameters
     ----------
     values
         Reflectance of the run's texture grid rows ``row0 ..`` (:meth:`RunTexture.rows`; the
-        rows :func:`reflectance_rows` names suffice), shape (rows, nx).
+        rows :func:`reflectance_rows` names for the highest stage suffice), shape (rows, nx).
     q
         Texels per line period along the track.
     fp
-        :func:`row_footprints` of at least ``stage`` rows.
-    stage, line0, line1
-        ``m`` and the band of output lines.
+        :func:`row_footprints` of at least ``max(stages)`` rows.
+    stages, line0, line1
+        The stages ``m`` and the band of output lines.
     row0
         Grid row of ``values[0]``.
-
-    Returns
-    -------
-    numpy.ndarray
-        (line1 - line0, N) reflectance 0..1, float64.
-    """
-    m = int(stage)
-    if m > len(fp.y_weights):
-        raise BenchSimError(f"stage {m}: footprints known for {len(fp.y_weights)} rows only")
-    nl = int(line1) - int(line0)
-    n_cols = fp.x_matrices[0].shape[0]
-    out = np.zeros((nl, n_cols), dtype=np.float64)
-    if nl <= 0:
-        return out
-    ny = values.shape[0]
-    for group in np.unique(fp.x_group[:m]):
-        kern, lo = _summed_kernel(fp, q, [i for i in range(m) if fp.x_group[i] == group])
-        start0 = int(line0) * q + lo - int(row0)
-        if start0 < 0 or start0 + (nl - 1) * q + kern.size > ny:
-            raise BenchSimError("stage truth: requested lines fall outside the run texture")
-        band = np.zeros((nl, values.shape[1]), dtype=np.float64)
-        for c in np.nonzero(kern)[0]:
-            a = start0 + int(c)
-            band += kern[c] * values[a : a + (nl - 1) * q + 1 : q]
-        out += (fp.x_matrices[group] @ band.T).T
-    return out / m
-
-
-def stages_reflectance(
-    values: np.ndarray, q: int, fp: RowFootprints, stages: Sequence[int], line0: int, line1: int,
-    row0: int = 0,
-) -> np.ndarray:
-    """:func:`stage_reflectance` of several stages at once, (S, line1 - line0, N) float64.
-
-    The texture is projected across the track first (one sparse product per across-track
-    matrix: ``P_g = values X_g^T``, (rows, N)); the stages then grow row by row,
-    ``m rho_m = (m' rho_m') + sum_{m' <= i < m} <along-track footprint of row i, P_g(i)>`` between
-    consecutive requested stages ``m' < m``, the rows of one group sharing one summed kernel.
-    Equal to :func:`stage_reflectance` up to the order of the float sums.
     """
     st = tuple(sorted(int(m) for m in stages))
     if st and st[-1] > len(fp.y_weights):

@@ -14,7 +14,6 @@ from bench_sim.sensor.stage_truth import (
     StageSums,
     reflectance_rows,
     row_footprints,
-    stage_reflectance,
     stages_reflectance,
 )
 from tests.conftest import tiny_cfg
@@ -70,16 +69,28 @@ def tiny_footprints():
     return cfg, setup, fp
 
 
+def _reflectance_by_definition(values, q, fp, m, line0, line1, row0):
+    """``rho_m[j] = (1/m) sum_{i < m} X_g(i) <w_i, values[y_base_i + (j + i) q ..]>``, one row and
+    one line at a time: each row's along-track weights, then its across-track matrix."""
+    out = np.zeros((line1 - line0, fp.x_matrices[0].shape[0]))
+    for i in range(m):
+        w, mat = fp.y_weights[i], fp.x_matrices[fp.x_group[i]]
+        for j in range(line0, line1):
+            a = int(fp.y_base[i]) + (j + i) * q - row0
+            out[j - line0] += mat @ (w @ values[a : a + w.size])
+    return out / m
+
+
 def test_reflectance_of_all_stages_at_once_matches_each_stage_alone(tiny_footprints):
-    """:func:`stages_reflectance` (projected across first, grown row by row) equals
-    :func:`stage_reflectance` of every stage up to float rounding."""
+    """:func:`stages_reflectance` (projected across first, grown row by row) equals the
+    definition evaluated row by row for every stage, up to float rounding."""
     cfg, setup, fp = tiny_footprints
     q, stages = setup.grid.q, (1, 2, 5, 11, 12)
     r0, r1 = reflectance_rows(fp, q, stages[-1], 3, 30)
     values = np.random.default_rng(1).random((r1 - r0, setup.grid.shape[1]))
     fast = stages_reflectance(values, q, fp, stages, 3, 30, row0=r0)
     for s, m in enumerate(stages):
-        direct = stage_reflectance(values, q, fp, m, 3, 30, row0=r0)
+        direct = _reflectance_by_definition(values, q, fp, m, 3, 30, r0)
         np.testing.assert_allclose(fast[s], direct, rtol=1e-12, atol=1e-15)
 
 
