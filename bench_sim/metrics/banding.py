@@ -63,6 +63,12 @@ def folded_cycles_per_line(frequency_hz: float, line_period_s: float) -> float:
     return float(min(nu, 1.0 - nu))
 
 
+def _harmonic_basis(lines: int, nu: float) -> np.ndarray:
+    """``(lines, 3)`` columns ``1, cos(2 pi nu j), sin(2 pi nu j)`` of the fits, ``j`` the line."""
+    j = np.arange(lines)
+    return np.stack([np.ones(lines), np.cos(2 * np.pi * nu * j), np.sin(2 * np.pi * nu * j)], axis=1)
+
+
 def banding_amplitude(profile: np.ndarray, cycles_per_line: float) -> float:
     """Amplitude of the ``cycles_per_line`` component of a line profile, relative to its mean
     (dimensionless); NaN when the frequency is 0 (indistinguishable from the mean) or the
@@ -80,9 +86,7 @@ def banding_amplitude(profile: np.ndarray, cycles_per_line: float) -> float:
     nu = float(cycles_per_line)
     if nu <= 0 or p.size * nu < 1 or p.size < 3:
         return float("nan")
-    j = np.arange(p.size)
-    basis = np.stack([np.ones(p.size), np.cos(2 * np.pi * nu * j), np.sin(2 * np.pi * nu * j)], axis=1)
-    (a, b, c), *_ = np.linalg.lstsq(basis, p, rcond=None)
+    (a, b, c), *_ = np.linalg.lstsq(_harmonic_basis(p.size, nu), p, rcond=None)
     return float(np.hypot(b, c) / a) if a > 0 else float("nan")
 
 
@@ -153,8 +157,7 @@ def _column_fits(
     ``(N, 3)`` (NaN where not fitted), their unscaled covariance ``(N, 3, 3)`` and the residual
     variance ``(N,)``."""
     lines, cols = q.shape
-    j = np.arange(lines)
-    basis = np.stack([np.ones(lines), np.cos(2 * np.pi * nu * j), np.sin(2 * np.pi * nu * j)], axis=1)
+    basis = _harmonic_basis(lines, nu)
     w = ok.astype(np.float64)
     gram = np.einsum("jn,ja,jb->nab", w, basis, basis)
     rhs = np.einsum("jn,ja->na", np.where(ok, q, 0.0), basis)
