@@ -247,18 +247,21 @@ def light_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, variant: str) ->
 
     Returns ``(records, rendered)``; ``rendered`` is False on a cache hit.
     """
-    key = records_key(cfg, variant)
+    cached = cached_records(cfg, variant)
+    if cached is not None:
+        return cached, False
+    rec = _render_records(mi, cfg, geom, records_key(cfg, variant))
     with _lock:
-        rec = _cache.get(key)
-        if rec is not None:
-            _cache.move_to_end(key)
-            return rec, False
-    rec = _render_records(mi, cfg, geom, key)
-    with _lock:
-        _cache[key] = rec
-        while len(_cache) > CACHE_ENTRIES:
-            _cache.popitem(last=False)
+        _store(rec)
     return rec, True
+
+
+def _store(rec: LightRecords) -> None:
+    """Put ``rec`` in the cache under its key, dropping the least recently used beyond
+    :data:`CACHE_ENTRIES` (the caller holds ``_lock``)."""
+    _cache[rec.key] = rec
+    while len(_cache) > CACHE_ENTRIES:
+        _cache.popitem(last=False)
 
 
 def cached_records(cfg: BenchConfig, variant: str) -> LightRecords | None:
@@ -280,9 +283,7 @@ def install_records(rec: LightRecords) -> bool:
         if rec.key in _cache:
             _cache.move_to_end(rec.key)
             return False
-        _cache[rec.key] = rec.shareable()
-        while len(_cache) > CACHE_ENTRIES:
-            _cache.popitem(last=False)
+        _store(rec.shareable())
     return True
 
 
