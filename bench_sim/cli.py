@@ -39,6 +39,7 @@ from bench_sim.errors import BenchSimError, kept_note
 from bench_sim.fusion.methods import FUSE_METHODS
 from bench_sim.fusion.tonemap import TONEMAP_METHODS
 from bench_sim.io import format_bytes
+from bench_sim.render import record_store
 from bench_sim.runtime.backend import choose_backend, versions
 from bench_sim.runtime.resources import available_memory_bytes
 from bench_sim.workflows import calibrate as calibrate_workflow
@@ -273,7 +274,8 @@ def _user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
 
 @app.command()
 def doctor() -> None:
-    """Print the chosen Mitsuba variant, the LLVM library and why, memory, and versions.
+    """Print the chosen Mitsuba variant, the LLVM library and why, memory, the light-record
+    cache's folder and size, and versions.
 
     A variant forced by ``BENCH_SIM_VARIANT`` that cannot run here is one line, exit status 2."""
     choice = choose_backend()
@@ -284,6 +286,8 @@ def doctor() -> None:
         print(f"  probe {what}: {detail}")
     mem = available_memory_bytes()
     print(f"memory      : {format_bytes(mem[0]) + ' available (' + mem[1] + ')' if mem else 'unknown'}")
+    folder, (size, files) = record_store.store_dir(), record_store.usage()
+    print(f"record cache: {folder} ({size / 2**20:.1f} MiB, {files} sets)" if folder else "record cache: off")
     for pkg, ver in versions().items():
         print(f"{pkg:<12}: {ver}")
 

@@ -51,8 +51,11 @@ from bench_sim.errors import BenchSimError
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.metrics.fusion_truth import relative_error, tdi_light_ratio
 from bench_sim.render.exposures import RenderSetup, iter_photon_frames, prepare
+from bench_sim.render.frame_kernel import TAP_LOOP
+from bench_sim.runtime.jit import Loop, warm_up
 from bench_sim.runtime.parallel import prefetch, seed_sequence
-from bench_sim.sensor.dtdi import frames_needed, full_scale_dn
+from bench_sim.sensor import cumulant_kernel, diagonal_sums, exposure_kernel
+from bench_sim.sensor.dtdi import check_stage_subset, check_stages, frames_needed, full_scale_dn
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern
 from bench_sim.sensor.model import word_dtype
 from bench_sim.sensor.pass_lines import ArraySink, LineAssembler, PassSink
@@ -64,24 +67,10 @@ if TYPE_CHECKING:
     import xarray as xr
 
 __all__ = [
-    "run_pass",
-    "PassResult",
-    "check_stages",
-    "Variable",
-    "PASS_VARIABLES",
-    "VARIABLES_BY_NAME",
-    "STAGE_DIMS",
-    "IMAGE_DIMS",
-    "WORD",
-    "pass_variables",
-    "stage_pixel_bytes",
-    "SENSOR_CHUNK_FRAMES",
-    "RENDER_CHUNK_FRAMES",
-    "TRUTH_BAND_LINES",
-    "pass_dtypes",
-    "pass_coords",
-    "pass_attrs",
-    "COORD_ATTRS",
+    "run_pass", "PassResult", "Variable", "PASS_VARIABLES", "VARIABLES_BY_NAME", "STAGE_DIMS",
+    "IMAGE_DIMS", "WORD", "pass_variables", "stage_pixel_bytes", "SENSOR_CHUNK_FRAMES",
+    "RENDER_CHUNK_FRAMES", "TRUTH_BAND_LINES", "pass_dtypes", "pass_coords", "pass_attrs", "COORD_ATTRS",
+    "pass_loops",
 ]
 
 #: Frames exposed per vectorised sensor call (the temporal noise depends on it: fixed).
@@ -185,37 +174,6 @@ def stage_pixel_bytes(beta_bits: int | None, *, truth: bool) -> int:
     words, or as stored for any ``beta`` (``None``)."""
     beta = BETA_BITS_MAX if beta_bits is None else beta_bits
     return sum(v.array_dtype(beta).itemsize for v in pass_variables(STAGE_DIMS, truth=truth))
-
-
-def check_stages(
-    stages: Iterable[int] | str, rows: int, what: str = "stages", given: str | None = None
-) -> tuple[int, ...]:
-    """Validate requested stages: integers in ``1 .. rows``, no duplicates; ``"all"`` means
-    ``1 .. rows``. Returns them sorted; raises :class:`BenchSimError` (one line) otherwise,
-    quoting ``given`` (what the user wrote, e.g. the ``--stages`` text) or the stages."""
-    if isinstance(stages, str):
-        if stages.strip() == "all":
-            return tuple(range(1, rows + 1))
-        raise BenchSimError(f"{what} = {stages!r}: expected a list of stages or 'all'")
-    try:
-        items = list(stages)
-    except TypeError:
-        raise BenchSimError(f"{what} = {stages!r}: expected a list of stages or 'all'") from None
-    shown = given if given is not None else repr(items)
-    if not items:
-        raise BenchSimError(f"{what}: at least one stage is needed")
-    out = []
-    for m in items:
-        if isinstance(m, bool) or not isinstance(m, int | np.integer):
-            raise BenchSimError(f"{what} = {shown}: {m!r} is not an integer stage")
-        out.append(int(m))
-    dup = sorted({m for m in out if out.count(m) > 1})
-    if dup:
-        raise BenchSimError(f"{what} = {shown}: stage {dup[0]} is given twice (each stage once)")
-    bad = [m for m in out if not 1 <= m <= rows]
-    if bad:
-        raise BenchSimError(f"{what} = {shown}: stage {bad[0]} outside 1..{rows} (sensor.rows = {rows})")
-    return tuple(sorted(out))
 
 
 @dataclass
@@ -337,7 +295,7 @@ def _fused(cfg: BenchConfig, lines: dict[int, dict[str, np.ndarray]]) -> dict[st
         "gamma_hdr": fused.hdr.astype(dtypes["gamma_hdr"]),
         "gamma_hdr_source": fused.source.astype(dtypes["gamma_hdr_source"]),
     }
-    if "linear_dn" in lines[mu2]:
+    if "linear_dn" in lines[mu2] and "photons" in lines[mu1]:
         err = relative_error(fused.hdr, lines[mu2]["linear_dn"] - ped)
         ratio = tdi_light_ratio(lines[mu1]["photons"], lines[mu2]["photons"], mu1, mu2)
         out["gamma_hdr_error"] = err.astype(dtypes["gamma_hdr_error"])
@@ -346,15 +304,17 @@ def _fused(cfg: BenchConfig, lines: dict[int, dict[str, np.ndarray]]) -> dict[st
 
 
 def pass_dtypes(
-    cfg: BenchConfig, st: tuple[int, ...], *, truth: bool
+    cfg: BenchConfig, st: tuple[int, ...], *, truth: bool, truth_stages: tuple[int, ...] | None = None
 ) -> tuple[dict[str, np.dtype], dict[str, np.dtype]]:
     """The dtypes of a pass's stage variables and of its image variables (``gamma_hdr`` and
-    ``gamma_hdr_source`` when both fusion stages are in ``st``), from :data:`PASS_VARIABLES`."""
+    ``gamma_hdr_source`` when both fusion stages are in ``st``; the maps of the truth when
+    both have it: in ``truth_stages``, default ``st``), from :data:`PASS_VARIABLES`."""
     beta = cfg.dtdi.beta_bits
     stage = {v.name: v.array_dtype(beta) for v in pass_variables(STAGE_DIMS, truth=truth)}
-    fused = cfg.fusion.mu1 in st and cfg.fusion.mu2 in st
-    image = {v.name: v.array_dtype(beta) for v in pass_variables(IMAGE_DIMS, truth=truth, maps=True)}
-    return stage, (image if fused else {})
+    both = {cfg.fusion.mu1, cfg.fusion.mu2}
+    maps = truth and both <= set(st if truth_stages is None else truth_stages)
+    image = {v.name: v.array_dtype(beta) for v in pass_variables(IMAGE_DIMS, truth=maps, maps=True)}
+    return stage, (image if both <= set(st) else {})
 
 
 def _make_dataset(
@@ -363,9 +323,15 @@ def _make_dataset(
     setup: RenderSetup,
     st: tuple[int, ...],
     arrays: dict[str, np.ndarray],
+    truth_st: tuple[int, ...] | None = None,
 ) -> xr.Dataset:
-    """The pass's :class:`xarray.Dataset` (see the module docstring) of its arrays."""
+    """The pass's :class:`xarray.Dataset` (see the module docstring) of its arrays; of a pass
+    whose truth covers some stages only (``truth_st``), at those stages (their words too)."""
     import xarray as xr
+
+    if truth_st is not None and truth_st != st:
+        arrays = dict(arrays, dn=arrays["dn"][[st.index(m) for m in truth_st]])
+        st = truth_st
 
     data: dict[str, Any] = {v.name: (v.dims, arrays[v.name]) for v in PASS_VARIABLES if v.name in arrays}
     ds = xr.Dataset(data, coords=pass_coords(cfg, st))
@@ -427,6 +393,7 @@ def run_pass(
     on_frames: Callable[[int], None] | None = None,
     fixed_pattern: FixedPattern | None = None,
     sink: Callable[[RenderSetup], PassSink] | None = None,
+    truth_stages: Iterable[int] | None = None,
 ) -> PassResult:
     """Run one simulation pass: render, expose, accumulate stages and truth, fuse.
 
@@ -438,7 +405,8 @@ def run_pass(
     cfg
         The bench; ``cfg.lines`` output lines of ``cfg.sensor.columns`` columns.
     stages
-        Stages to output, each in ``1 .. sensor.rows`` (validated by :func:`check_stages`).
+        Stages to output, each in ``1 .. sensor.rows``
+        (:func:`bench_sim.sensor.dtdi.check_stages`).
     seed
         Root seed, a ``SeedSequence`` (a sample's or sweep point's stream) or a generator to
         draw from, consumed in this order: one integer for the renderer (reference engine),
@@ -459,41 +427,73 @@ def run_pass(
         returns the :class:`~bench_sim.sensor.pass_lines.PassSink` that receives every variable's
         completed lines (stage words, truth, fused image; as the dataset would hold them) while
         the pass runs. The result then has no arrays (``stage_dn`` empty, no ``dataset``).
+    truth_stages
+        With ``truth``: compute it for these of the ``stages`` only (default: all of them),
+        reading only their rows (the truth of a stage does not depend on the others). The
+        ``dataset`` then holds these stages (``stage_dn`` has every stage's words); the maps of
+        ``gamma_hdr`` need both fusion stages among them. Not with ``sink``.
     """
     st = check_stages(stages, cfg.sensor.rows)
+    some = st if truth_stages is None else check_stage_subset(truth_stages, st, "truth_stages")
+    tst = some if truth else None
+    if sink is not None and tst not in (None, st):
+        raise BenchSimError("run_pass: truth_stages is not supported with a sink (it writes every stage)")
     rng = np.random.default_rng(seed)  # a Generator is used as is
     n_rows, n_cols = st[-1], cfg.sensor.columns
     timings = {"render_setup": 0.0, "render_frames": 0.0, "sensor_dtdi": 0.0, "truth": 0.0, "pass_wall": 0.0}
 
     t0 = time.perf_counter()
+    warm_up(pass_loops(cfg, truth=tst is not None))  # loaded beside the set-up
     setup = prepare(cfg, frames_needed(cfg.lines, st), rng)
     timings["render_setup"] = time.perf_counter() - t0
-    fixed = draw_fixed_pattern(cfg.sensor, rng)
-    if fixed_pattern is not None:
-        if fixed_pattern.shape != fixed.shape:
-            raise BenchSimError(
-                f"fixed_pattern: shape {fixed_pattern.shape}, the sensor is {fixed.shape} (rows, columns)"
-            )
-        fixed = fixed_pattern
+    fixed = _fixed_pattern(cfg, rng, fixed_pattern)
     noise = seed_sequence(rng)
     fp = fixed if n_rows == cfg.sensor.rows else fixed.window(n_rows, n_cols)
-    stage_dtypes, image_dtypes = pass_dtypes(cfg, st, truth=truth)
-    array_sink = ArraySink(st, cfg.lines, n_cols, stage_dtypes, image_dtypes) if sink is None else None
-    out = array_sink if array_sink is not None else sink(setup)  # type: ignore[misc]
-    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    fuse = (mu1, mu2, lambda g1, g2: _fused(cfg, {mu1: g1, mu2: g2})) if image_dtypes else None
-    lines_out = LineAssembler(st, stage_dtypes, out, float(full_scale_dn(cfg.dtdi.beta_bits) - 1), fuse)
+    lines_out, array_sink = _assembler(cfg, st, tst, truth, sink, setup)
     stage_truth = None
-    if truth:
+    if tst is not None:
         t0 = time.perf_counter()
         stage_truth = PassTruth(
-            cfg, setup, fp, st, pedestal_dn=_pedestal_dn(cfg), band_lines=TRUTH_BAND_LINES
+            cfg, setup, fp, tst, pedestal_dn=_pedestal_dn(cfg), band_lines=TRUTH_BAND_LINES,
+            footprint_rows=n_rows,
         )
         timings["truth"] += time.perf_counter() - t0
-
     _stream(cfg, setup, fp, noise, st, lines_out, stage_truth, timings, on_frames)
     if array_sink is None:
         return PassResult({}, setup, timings, None, truth=truth)
     dn = {m: array_sink.arrays["dn"][s] for s, m in enumerate(st)}
-    make = functools.partial(_make_dataset, cfg, seed, setup, st, array_sink.arrays)
+    make = functools.partial(_make_dataset, cfg, seed, setup, st, array_sink.arrays, tst)
     return PassResult(dn, setup, timings, make, truth=truth)
+
+
+def pass_loops(cfg: BenchConfig, *, truth: bool) -> tuple[Loop, ...]:
+    """The compiled loops (:mod:`bench_sim.runtime.jit`) a pass of ``cfg`` runs."""
+    frames = (TAP_LOOP,) if cfg.render.engine == "fast" else ()
+    return frames + exposure_kernel.LOOPS + diagonal_sums.LOOPS + (cumulant_kernel.LOOPS if truth else ())
+
+
+def _fixed_pattern(cfg: BenchConfig, rng: np.random.Generator, given: FixedPattern | None) -> FixedPattern:
+    """The pass's physical sensor: drawn from ``rng`` (always, so the noise after it is the same),
+    or ``given``."""
+    fixed = draw_fixed_pattern(cfg.sensor, rng)
+    if given is not None and given.shape != fixed.shape:
+        raise BenchSimError(f"fixed_pattern: shape {given.shape}, the sensor is {fixed.shape} "
+                            "(rows, columns)")
+    return fixed if given is None else given
+
+
+def _assembler(
+    cfg: BenchConfig, st: tuple[int, ...], tst: tuple[int, ...] | None, truth: bool,
+    sink: Callable[[RenderSetup], PassSink] | None, setup: RenderSetup,
+) -> tuple[LineAssembler, ArraySink | None]:
+    """The pass's line assembler (truth of stages ``tst``) and, without ``sink``, its arrays."""
+    stage_dtypes, image_dtypes = pass_dtypes(cfg, st, truth=truth, truth_stages=tst)
+    stages_of = {n: tst for n in stage_dtypes if n != "dn"} if tst is not None else None
+    arrays = None if sink is not None else ArraySink(
+        st, cfg.lines, cfg.sensor.columns, stage_dtypes, image_dtypes, stages_of
+    )
+    out = arrays if arrays is not None else sink(setup)  # type: ignore[misc]
+    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
+    fuse = (mu1, mu2, lambda g1, g2: _fused(cfg, {mu1: g1, mu2: g2})) if image_dtypes else None
+    top = float(full_scale_dn(cfg.dtdi.beta_bits) - 1)
+    return LineAssembler(st, stage_dtypes, out, top, fuse, stages_of), arrays

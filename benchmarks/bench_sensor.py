@@ -37,6 +37,8 @@ import numpy as np
 from baseline import Side, add_baseline_args, load_line, median, paired
 
 from bench_sim.config import DTDIConfig, SensorConfig
+from bench_sim.runtime.jit import compiled
+from bench_sim.sensor import diagonal_sums, exposure_kernel
 from bench_sim.sensor.dtdi import DTDIAccumulator, frames_needed
 from bench_sim.sensor.stream import DEFAULT_CHUNK_FRAMES, iter_sensor_dtdi
 
@@ -167,6 +169,8 @@ def main() -> None:
     if a.no_memory:
         return
     os.environ["BENCH_SIM_THREADS"] = "1"
+    for loop in diagonal_sums.LOOPS + exposure_kernel.LOOPS:  # numba's one-off set-up: not traced
+        compiled(*loop)
     print("peak traced memory of a streaming pass (lines consumed as they come), stages 5..100/5;")
     print(f"  sensor + DTDI holds a few chunks of {DEFAULT_CHUNK_FRAMES} frames (photons, electrons, DN)")
     for n in (1_000, 10_000):

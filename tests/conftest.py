@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
 import pytest
 
 from bench_sim.config import BenchConfig, load_config, with_overrides
+
+# The suite neither reads nor writes the user's on-disk light records
+# (bench_sim.render.record_store), so every test renders what it counts; set at import, so the
+# processes the tests start (commands, Dask workers) inherit it. Tests of the store turn it on
+# with monkeypatch.
+os.environ.setdefault("BENCH_SIM_RECORD_CACHE", "off")
 
 
 def make_cfg(**sections: Any) -> BenchConfig:

@@ -18,9 +18,10 @@
     record's bilinear weights on the motion-aligned texture grid (:mod:`bench_sim.render.texture`)
     are summed into a small kernel per pixel and light; since one line period moves the material
     by exactly ``q`` texels, frame ``k`` is the same kernels applied ``k * q`` texels further along
-    -- strided array slices, no lookups. Smear is a box filter of the texture along the track
-    (exact for the linear interpolant). Configs where the factorisation is not exact (glossy
-    print, indirect light) are refused.
+    -- fixed offsets into the texture's phase planes, applied by a compiled loop
+    (:mod:`bench_sim.render.frame_kernel`), no lookups. Smear is a box filter of the texture
+    along the track (exact for the linear interpolant). Configs where the factorisation is not
+    exact (glossy print, indirect light) are refused.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.render.frame_kernel import apply_taps
 from bench_sim.render.records import (
     REFERENCE_IRRADIANCE_W_M2,
     LightRecords,
@@ -260,9 +262,10 @@ class FastEngine:
             self._combined = {coeffs: got}
         return got
 
-    def _window(self, k0: int, k1: int) -> tuple[int, list[list[np.ndarray]]]:
+    def _window(self, k0: int, k1: int) -> tuple[int, np.ndarray]:
         """Phase planes of the smeared texture for frames ``k0 .. k1 - 1``: ``(w0, planes)``,
-        ``planes[a][b][r, c]`` = smeared grid texel ``(w0 + a + r q, b + c q)``."""
+        ``planes[a, b, r, c]`` = smeared grid texel ``(w0 + a + r q, b + c q)``, shape (q, q, R,
+        C) float32 (the planes padded to one shape; no tap reads the padding)."""
         q, a0 = self.grid.q, self.grid.a0
         lo = min(k.base_y for k in self.kernels) - a0 + k0 * q
         hi = max(k.base_y + k.weights.shape[1] for k in self.kernels) - a0 + (k1 - 1) * q + 1
@@ -274,7 +277,12 @@ class FastEngine:
         # smear_filter does for the whole grid)
         raw = self.grid.rows(w0, min(hi + self._smear_rows, ny))
         win = smear_filter(raw, self.grid.h_y_m, self.geom.smear_m)[: hi - w0]
-        return w0, [[np.ascontiguousarray(win[a::q, b::q]) for b in range(q)] for a in range(q)]
+        planes = np.zeros((q, q, -(-win.shape[0] // q), -(-win.shape[1] // q)), dtype=np.float32)
+        for a in range(q):
+            for b in range(q):
+                phase = win[a::q, b::q]
+                planes[a, b, : phase.shape[0], : phase.shape[1]] = phase
+        return w0, planes
 
     def radiance_frames(self, k0: int, k1: int) -> np.ndarray:
         """Radiance [W m^-2 sr^-1], shape (k1 - k0, rows, columns), float32."""
@@ -290,31 +298,20 @@ class FastEngine:
         w0, planes = self._window(k0, k1)
         out = np.empty((nk, cfg.sensor.rows, N), dtype=np.float32)
 
-        def apply(kern: _RowKernel, weights: np.ndarray, into: np.ndarray, tmp: np.ndarray) -> None:
-            ty, tx = weights.shape[:2]
-            for a in range(ty):
-                ya = kern.base_y + a - a0 + k0 * q - w0
-                r0 = ya // q
-                for b in range(tx):
-                    xb = kern.base_x + b
-                    plane = planes[ya % q][xb % q]
-                    c0 = xb // q
-                    np.multiply(plane[r0 : r0 + nk, c0 : c0 + N], weights[a, b], out=tmp)
-                    into += tmp
-
         def rows(band: range) -> None:
             acc = np.empty((nk, N), dtype=np.float32)
-            tmp = np.empty((nk, N), dtype=np.float32)
             part = np.empty((nk, N), dtype=np.float32)
             for i in band:
                 kern = self.kernels[i]
+                # window texel row of tap row 0 at frame k0
+                y0 = kern.base_y - a0 + k0 * q - w0
                 acc[...] = static_steady[i]
                 for w, s0 in static_varying:
                     acc += w * s0[i]
-                apply(kern, combined[i], acc, tmp)
+                apply_taps(planes, combined[i], y0, kern.base_x, acc)
                 for li in varying:
                     part[...] = 0.0
-                    apply(kern, kern.weights[li], part, tmp)
+                    apply_taps(planes, kern.weights[li], y0, kern.base_x, part)
                     part *= coeffs[li].astype(np.float32)[:, None]
                     acc += part
                 out[:, i, :] = acc

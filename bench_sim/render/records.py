@@ -35,6 +35,14 @@ Reuse
     either way (the renders use :data:`RECORD_SEED`, not the run's seed), so results do not
     depend on which process rendered them.
 
+    Across runs, the records are also kept on disk (:mod:`bench_sim.render.record_store`:
+    by default ``~/.cache/bench_sim/records``, at most 2 GiB, least recently used dropped first;
+    ``BENCH_SIM_RECORD_CACHE=off`` turns it off): :func:`cached_records` looks in the process's
+    cache, then on disk (a set found there joins the process's cache), and :func:`light_records`
+    stores what it renders. A set from disk holds the rendered arrays byte for byte and counts
+    no renders (``renders`` 0: none was made in this process), so a new process of a scene
+    rendered before imports no Mitsuba for it and gives the same bytes.
+
 The records are rendered with a fixed sampler seed, not the run's: they are the engine's
 estimate of the scene's (deterministic) radiance, whose Monte Carlo error (about 1 % per pixel at
 16 spp x 4 x 4 records) is a fixed error of the renderer, the same for every run of the scene.
@@ -51,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig, config_to_toml_dict, with_overrides
+from bench_sim.render import record_store
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.scene import fill_radiance_w_m2_sr, light_names, scene_dict
 
@@ -243,7 +252,8 @@ def _render_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, key: str) -> L
 
 
 def light_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, variant: str) -> tuple[LightRecords, bool]:
-    """The records of ``cfg``'s scene: from the process-level cache, or rendered now.
+    """The records of ``cfg``'s scene: from the process-level cache or the disk store
+    (:func:`cached_records`), or rendered now (and then put in both).
 
     Returns ``(records, rendered)``; ``rendered`` is False on a cache hit.
     """
@@ -253,6 +263,7 @@ def light_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, variant: str) ->
     rec = _render_records(mi, cfg, geom, records_key(cfg, variant))
     with _lock:
         _store(rec)
+    record_store.save(rec.key, rec.lights, {name: getattr(rec, name) for name in record_store.ARRAYS})
     return rec, True
 
 
@@ -266,12 +277,26 @@ def _store(rec: LightRecords) -> None:
 
 def cached_records(cfg: BenchConfig, variant: str) -> LightRecords | None:
     """The records of ``cfg``'s scene for Mitsuba ``variant`` if this process's cache holds them
-    (rendered here or installed), else ``None``; Mitsuba is not needed to ask."""
+    (rendered here or installed) or the disk store does (:mod:`bench_sim.render.record_store`;
+    such a set, of 0 renders, joins the process's cache), else ``None``; Mitsuba is not needed
+    to ask."""
     key = records_key(cfg, variant)
     with _lock:
         rec = _cache.get(key)
         if rec is not None:
             _cache.move_to_end(key)
+            return rec
+    stored = record_store.load(key)
+    if stored is None:
+        return None
+    with _lock:
+        rec = _cache.get(key)  # another thread may have put them there meanwhile
+        if rec is None:
+            lights, arrays = stored
+            d_rec, static, position, hit = (arrays[name] for name in record_store.ARRAYS)
+            rec = LightRecords(lights, d_rec, static, position, hit, key, renders=0)
+            _store(rec)
+        _cache.move_to_end(key)
         return rec
 
 
@@ -288,6 +313,7 @@ def install_records(rec: LightRecords) -> bool:
 
 
 def clear_record_cache() -> None:
-    """Forget every cached record set (the next fast-engine set-up renders again)."""
+    """Forget every record set this process holds (the next fast-engine set-up reads them from
+    the disk store, if it has them, or renders again); the disk store is left as it is."""
     with _lock:
         _cache.clear()

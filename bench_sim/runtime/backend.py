@@ -49,6 +49,7 @@ __all__ = [
     "mitsuba_variants",
     "resolve_preference",
     "check_variant_name",
+    "cache_folder",
 ]
 
 ENV_VARIANT = "BENCH_SIM_VARIANT"
@@ -151,11 +152,18 @@ def _drjit_version() -> str:
         return "missing"
 
 
-def _cache_file() -> Path:
+def cache_folder() -> Path:
+    """bench_sim's cache folder on this machine: ``$BENCH_SIM_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/bench_sim``, else ``~/.cache/bench_sim`` (the backend probes' verdicts,
+    the fast engine's records)."""
     root = os.environ.get("BENCH_SIM_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "bench_sim"
     )
-    return Path(root) / "backend_probes.json"
+    return Path(root)
+
+
+def _cache_file() -> Path:
+    return cache_folder() / "backend_probes.json"
 
 
 def _cache_key(kind: str, path: str | None) -> str:

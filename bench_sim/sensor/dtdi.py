@@ -66,6 +66,7 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from bench_sim.errors import BenchSimError
+from bench_sim.sensor.diagonal_sums import diagonal_sums
 from bench_sim.sensor.model import (
     check_beta_bits,
     full_scale_dn,
@@ -84,6 +85,8 @@ __all__ = [
     "complete_lines",
     "frames_needed",
     "validate_stages",
+    "check_stages",
+    "check_stage_subset",
     "stage_pedestals",
     "stage_mean_var_dn",
     "stage_dark_std_dn",
@@ -115,6 +118,46 @@ def validate_stages(stages: Iterable[int], rows: int | None = None) -> tuple[int
     return tuple(out)
 
 
+def check_stages(
+    stages: Iterable[int] | str, rows: int, what: str = "stages", given: str | None = None
+) -> tuple[int, ...]:
+    """Validate requested stages: integers in ``1 .. rows``, no duplicates; ``"all"`` means
+    ``1 .. rows``. Returns them sorted; raises :class:`BenchSimError` (one line) otherwise,
+    quoting ``given`` (what the user wrote, e.g. the ``--stages`` text) or the stages."""
+    if isinstance(stages, str):
+        if stages.strip() == "all":
+            return tuple(range(1, rows + 1))
+        raise BenchSimError(f"{what} = {stages!r}: expected a list of stages or 'all'")
+    try:
+        items = list(stages)
+    except TypeError:
+        raise BenchSimError(f"{what} = {stages!r}: expected a list of stages or 'all'") from None
+    shown = given if given is not None else repr(items)
+    if not items:
+        raise BenchSimError(f"{what}: at least one stage is needed")
+    out = []
+    for m in items:
+        if isinstance(m, bool) or not isinstance(m, int | np.integer):
+            raise BenchSimError(f"{what} = {shown}: {m!r} is not an integer stage")
+        out.append(int(m))
+    dup = sorted({m for m in out if out.count(m) > 1})
+    if dup:
+        raise BenchSimError(f"{what} = {shown}: stage {dup[0]} is given twice (each stage once)")
+    bad = [m for m in out if not 1 <= m <= rows]
+    if bad:
+        raise BenchSimError(f"{what} = {shown}: stage {bad[0]} outside 1..{rows} (sensor.rows = {rows})")
+    return tuple(sorted(out))
+
+
+def check_stage_subset(given: Iterable[int], stages: Sequence[int], what: str) -> tuple[int, ...]:
+    """Validate ``given`` (:func:`check_stages`) as some of ``stages``; returns them sorted."""
+    st = tuple(int(m) for m in stages)
+    out = check_stages(list(given), max(st), what=what)
+    if not set(out) <= set(st):
+        raise BenchSimError(f"{what} = {list(out)}: each must be one of the pass's stages {list(st)}")
+    return out
+
+
 Pedestal = float | Mapping[int, float]
 
 
@@ -133,12 +176,17 @@ def stage_pedestals(pedestal_dn: Pedestal, stages: Sequence[int]) -> dict[int, f
     return out
 
 
+def _word_shift(stage: int, black_offset_dn: float, subtract_black: bool, pedestal_dn: float) -> float:
+    """The shift [DN] added to stage ``m``'s row sum: the pedestal, less ``m b`` if subtracted."""
+    return float(pedestal_dn) - (stage * float(black_offset_dn) if subtract_black else 0.0)
+
+
 def _finish(
     sums: np.ndarray, stage: int, beta_bits: int, black_offset_dn: float, subtract_black: bool,
     pedestal_dn: float,
 ) -> np.ndarray:
     """Raw row sums -> stored words: subtract m*b, add the pedestal, round, clip (eq. 4)."""
-    shift = float(pedestal_dn) - (stage * float(black_offset_dn) if subtract_black else 0.0)
+    shift = _word_shift(stage, black_offset_dn, subtract_black, pedestal_dn)
     val = sums.astype(np.float64)  # exact for the integer sums of the accumulator
     if shift != 0.0:
         val += shift
@@ -313,9 +361,10 @@ class DTDIAccumulator:
         (in order); a stage that completed no line gets a (0, N) array.
 
         Row ``i`` of the chunk's frame ``t`` (frame ``k = k0 + t``) is added to line ``k - i``
-        for all frames at once, row after row, so every line gets its rows in the order
-        ``i = 0, 1, ...`` as frame by frame; stage ``m`` of a line is its sum once row
-        ``m - 1`` is in.
+        (:func:`bench_sim.sensor.diagonal_sums.diagonal_sums`, one compiled loop), every line
+        getting its rows in the order ``i = 0, 1, ...`` as frame by frame; stage ``m`` of a line
+        is its sum once row ``m - 1`` is in, turned into its word there. The blocks are views
+        into one array of all stages' lines.
         """
         chunk = np.asarray(frames_dn)
         if chunk.ndim == 2:
@@ -328,24 +377,23 @@ class DTDIAccumulator:
                 f"frame shape {chunk.shape[1:]}: expected (rows >= {self.ring_rows}, {self.n_columns})"
             )
         r_rows, k0 = self.ring_rows, self.frames_seen
-        out = {m: np.zeros((0, self.n_columns), dtype=np.uint32) for m in self.stages}
         if n_frames == 0:
-            return out
+            return {m: np.zeros((0, self.n_columns), dtype=np.uint32) for m in self.stages}
         win = self._window(n_frames, self._sum_dtype(chunk.dtype))
-        last = r_rows - 1  # window row of line k0 (row 0 of frame 0)
-        if n_frames == 1:  # one frame: every line gets one row, in one reversed add
-            win[::-1] += chunk[0, :r_rows]
-        for i in range(r_rows):
-            if n_frames > 1:
-                win[last - i : last - i + n_frames] += chunk[:, i]
-            m = i + 1
-            if m in self.pedestal_dn:  # a stage: lines k0 + t - i (t >= i - k0: line >= 0)
-                first = max(i - k0, 0)
-                if first < n_frames:
-                    out[m] = _finish(
-                        win[last - i + first : last - i + n_frames], m, self.beta_bits,
-                        self.black_offset_dn, self.subtract_black, self.pedestal_dn[m],
-                    )
+        # stage m (row i = m - 1) completes lines k0 + t - i for frames t >= i - k0 (line >= 0)
+        firsts = {m: min(max(m - 1 - k0, 0), n_frames) for m in self.stages}
+        ends = np.cumsum([n_frames - f for f in firsts.values()])
+        words = np.empty((int(ends[-1]), self.n_columns), dtype=np.uint32)  # all stages' lines
+        emit_from = np.full(r_rows, n_frames, dtype=np.int64)
+        out_row0 = np.zeros(r_rows, dtype=np.int64)
+        shifts = np.zeros(r_rows, dtype=np.float64)
+        out = {}
+        for (m, first), e in zip(firsts.items(), ends, strict=True):
+            out[m] = words[e - (n_frames - first) : e]
+            emit_from[m - 1], out_row0[m - 1] = first, e - n_frames
+            shifts[m - 1] = _word_shift(m, self.black_offset_dn, self.subtract_black, self.pedestal_dn[m])
+        top = float(word_clip_dn(self.beta_bits))
+        diagonal_sums(chunk, r_rows, win, words, emit_from, out_row0, shifts, top)
         self._origin += n_frames
         self.frames_seen = k0 + n_frames
         return out

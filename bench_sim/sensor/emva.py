@@ -45,7 +45,7 @@ import numpy as np
 
 from bench_sim.config import SensorConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.sensor.kernels import TILE_ELEMENTS, Scratch, electrons_to_dn, joint_quantile_into
+from bench_sim.sensor.exposure_kernel import electrons_to_dn, joint_draw_dn, joint_quantile
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2, pixel_mean_var_dn, pixel_saturation_dn
 from bench_sim.sensor.sampler import (
     COMBINED_READ_NOISE_MIN_E,
@@ -315,14 +315,11 @@ def _expose_in_cache(
     """:func:`expose`'s loop for :attr:`ExposurePlan.in_cache`, bit-identical to the general
     one (:func:`_block_electrons` with :func:`shot_and_read_electrons`): per block of ``step``
     frames the same draws (its normals, then the pixels near the full well apart), with the
-    arithmetic done in place on slabs of frame lines that stay in the cache
-    (:mod:`bench_sim.sensor.kernels`)."""
+    per-pixel arithmetic in one compiled pass (:mod:`bench_sim.sensor.exposure_kernel`)."""
     rows, cols = plan.shape
     lines = min(step, frames.shape[0]) * rows
     lam_buf = np.empty((lines, cols), plan.work)  # mean electrons, the Poisson mean [e-]
     z_buf = np.empty((lines, cols), plan.work)
-    tile = max(1, TILE_ELEMENTS // cols)
-    w = Scratch.of((min(tile, lines), cols), plan.work)
     read_var = plan.work.type(plan.read_e * plan.read_e)
     for f0 in range(0, frames.shape[0], step):
         ph = frames[f0 : f0 + step]
@@ -338,24 +335,14 @@ def _expose_in_cache(
         box_muller_normals(rng, z)  # as shot_and_read_electrons draws them
         dn_blk = out[f0 : f0 + step].reshape(n, cols)
         s_blk = None if sat is None else sat[f0 : f0 + step].reshape(n, cols)
-        near = maybe_near and bool(lam.max() >= plan.near_fw_e)
-        e_blk = np.empty((n, cols), plan.work) if near else None
-        for l0 in range(0, n, tile):
-            ws = w.head(min(tile, n - l0))
-            sl = slice(l0, l0 + len(ws.x))
-            np.add(lam[sl], read_var, out=ws.v)
-            x = joint_quantile_into(z[sl], lam[sl], ws.v, lam[sl], ws)
-            if e_blk is not None:
-                e_blk[sl] = x
-                continue
-            s_sl = None
-            if s_blk is not None:
-                s_sl = s_blk[sl]
-                s_sl[...] = False
-            electrons_to_dn(x, plan.gain, plan.offset_dn, plan.top, True, dn_blk[sl], s_sl, ws.flag)
-        if e_blk is not None:
+        if maybe_near and bool(lam.max() >= plan.near_fw_e):
+            e_blk = joint_quantile(z, lam, lam, lam, np.empty((n, cols), plan.work), read_var)
             _near_full_well(plan, lam, np.zeros((), plan.work), e_blk, s_blk, rng)
             electrons_to_dn(e_blk, plan.gain, plan.offset_dn, plan.top, True, dn_blk, s_blk)
+            continue
+        if s_blk is not None:
+            s_blk[...] = False
+        joint_draw_dn(z, lam, read_var, plan.gain, plan.offset_dn, plan.top, dn_blk, s_blk)
 
 
 def _photons_max(ph: np.ndarray) -> float:

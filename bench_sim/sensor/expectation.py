@@ -46,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bench_sim.sensor.cumulant_kernel import linear_cumulants
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2
 
 __all__ = [
@@ -232,37 +233,6 @@ def _integrate_reads(
     return acc[0] / total, acc[1] / total, acc[2] / total
 
 
-def _linear_block(
-    lam: np.ndarray, det: np.ndarray, off: np.ndarray, lo: np.ndarray, top: np.ndarray, k1: np.ndarray,
-    k2: np.ndarray, k3: np.ndarray, near: np.ndarray, sd: np.ndarray, edge: np.ndarray, rm: ReadModel,
-    noisy: bool,
-) -> None:
-    """The linear cumulants of a block of reads into ``k1, k2, k3`` and ``near``: within
-    :data:`CLIP_SIGMAS` sd (plus 1 DN) of a clip, ``k1 + 6 sd + 1 >= top`` or ``k1 - 6 sd - 1 <= lo``.
-    ``sd`` and ``edge`` are scratch of the block's shape; a block fits the CPU's cache."""
-    k = rm.gain_dn_per_e
-    np.add(lam, det, out=k1)  # k1 = k (lam + d) + o
-    np.multiply(k, k1, out=k1)
-    np.add(k1, off, out=k1)
-    if noisy:  # k2 = k^2 (lam + s_r^2) (+ 1/12), k3 = k^3 lam
-        np.add(lam, rm.read_noise_e**2, out=k2)
-        np.multiply(k**3, lam, out=k3)
-    else:
-        k2[...] = rm.read_noise_e**2
-        k3[...] = 0.0
-    np.multiply(k * k, k2, out=k2)
-    np.sqrt(k2, out=sd)
-    if rm.quantization:
-        np.add(k2, QUANTIZATION_VAR_DN2, out=k2)
-    np.multiply(CLIP_SIGMAS, sd, out=sd)
-    np.add(k1, sd, out=edge)
-    np.add(edge, 1.0, out=edge)
-    np.greater_equal(edge, top, out=near)
-    np.subtract(k1, sd, out=edge)
-    np.subtract(edge, 1.0, out=edge)
-    np.logical_or(near, edge <= lo, out=near)
-
-
 def read_cumulants(
     lam_e: np.ndarray,
     det_e: np.ndarray | float,
@@ -299,26 +269,21 @@ def read_cumulants(
     (kappa_1, kappa_2, kappa_3)
         Arrays of ``lam_e``'s shape; ``kappa_2`` includes the rounding's ``1/12``.
     """
-    lam = np.asarray(lam_e, dtype=np.float64)
+    lam = np.asarray(lam_e, dtype=np.float64, order="C")
     det0, off0 = np.asarray(det_e, dtype=np.float64), np.asarray(offset_dn, dtype=np.float64)
     lo0 = np.asarray(lo_dn, dtype=np.float64)
     hi0 = np.asarray(rm.top_dn if hi_dn is None else hi_dn, dtype=np.float64)
     k1, k2, k3 = out if out is not None else (np.empty(lam.shape) for _ in range(3))
-    near = np.empty(lam.shape, dtype=bool)
-    top0 = np.minimum(hi0, rm.gain_dn_per_e * rm.full_well_e + off0)
-    n = lam.shape[-1] if lam.ndim else 1
-    flat = [np.broadcast_to(a, lam.shape).reshape(-1, n) for a in (lam, det0, off0, lo0, top0)]
-    outs = [a.reshape(-1, n) for a in (k1, k2, k3, near)]
     if not all(a.flags.c_contiguous for a in (k1, k2, k3)):
         raise ValueError("read_cumulants: the out arrays must be C-contiguous")
-    step = max(1, _BLOCK_ELEMENTS // n)
-    tmp = np.empty((2, min(step, flat[0].shape[0]), n))
-    for r in range(0, flat[0].shape[0], step):
-        rows = slice(r, r + step)
-        lam_b, det_b, off_b, lo_b, top_b = (f[rows] for f in flat)
-        k1_b, k2_b, k3_b, near_b = (o[rows] for o in outs)
-        sd, edge = tmp[:, : len(lam_b)]
-        _linear_block(lam_b, det_b, off_b, lo_b, top_b, k1_b, k2_b, k3_b, near_b, sd, edge, rm, noisy)
+    near = np.empty(lam.shape, dtype=bool)
+    top0 = np.minimum(hi0, rm.gain_dn_per_e * rm.full_well_e + off0)
+    # the linear cumulants of every read, and which reads lie near a clip, in one compiled pass
+    linear_cumulants(
+        lam, det0, off0, lo0, top0, (k1, k2, k3), near, gain_dn_per_e=rm.gain_dn_per_e,
+        read_noise_e=rm.read_noise_e, noisy=noisy, clip_sigmas=CLIP_SIGMAS,
+        quantization_var_dn2=QUANTIZATION_VAR_DN2 if rm.quantization else None,
+    )
     if np.any(near):
         det, off = (np.broadcast_to(a, lam.shape)[near] for a in (det0, off0))
         lo, hi = (np.broadcast_to(a, lam.shape)[near] for a in (lo0, hi0))

@@ -34,18 +34,22 @@ class PassSink(Protocol):
 
 class ArraySink:
     """A :class:`PassSink` into in-memory arrays: ``arrays[name]`` is (stages, lines, columns)
-    for a stage variable, (lines, columns) for an image variable, of the given dtypes."""
+    for a stage variable, (lines, columns) for an image variable, of the given dtypes.
+    ``stages_of``: the stages a stage variable has when not all (the truth of some stages only);
+    its array then holds those, in that order."""
 
     def __init__(
         self, stages: Sequence[int], lines: int, columns: int, stage_dtypes: Mapping[str, np.dtype],
-        image_dtypes: Mapping[str, np.dtype],
+        image_dtypes: Mapping[str, np.dtype], stages_of: Mapping[str, Sequence[int]] | None = None,
     ) -> None:
-        self.index = {int(m): s for s, m in enumerate(stages)}
-        self.arrays = {n: np.empty((len(stages), lines, columns), dtype=dt) for n, dt in stage_dtypes.items()}
+        held = {n: tuple(int(m) for m in (stages_of or {}).get(n, stages)) for n in stage_dtypes}
+        self.index = {n: {m: s for s, m in enumerate(st)} for n, st in held.items()}
+        self.arrays = {n: np.empty((len(held[n]), lines, columns), dtype=dt)
+                       for n, dt in stage_dtypes.items()}
         self.arrays.update({n: np.empty((lines, columns), dtype=dt) for n, dt in image_dtypes.items()})
 
     def write(self, name: str, stage: int | None, line0: int, block: np.ndarray) -> None:
-        target = self.arrays[name] if stage is None else self.arrays[name][self.index[stage]]
+        target = self.arrays[name] if stage is None else self.arrays[name][self.index[name][stage]]
         target[line0 : line0 + len(block)] = block
 
 
@@ -67,15 +71,22 @@ class LineAssembler:
         ``(mu1, mu2, f)``: ``f(lines_mu1, lines_mu2)`` -> image variable -> (n, N) lines, called
         with the same lines of both stages (variable -> (n, N) lines, as the sink got them) as
         they complete; or None.
+    stages_of
+        Stage variable -> its stages, for a variable that not every stage has (the truth of
+        some stages only; default: all ``stages``). A stage's line leaves once the variables
+        of that stage hold it.
     """
 
     def __init__(
         self, stages: Sequence[int], dtypes: Mapping[str, np.dtype], sink: PassSink, word_top: float,
-        fuse: tuple[int, int, FuseLines] | None = None,
+        fuse: tuple[int, int, FuseLines] | None = None, stages_of: Mapping[str, Sequence[int]] | None = None,
     ) -> None:
         self.dtypes, self.sink, self.word_top, self.fuse = dict(dtypes), sink, word_top, fuse
         self.stages = tuple(int(m) for m in stages)
-        keys = [(n, m) for n in dtypes for m in self.stages]
+        held = {n: {int(m) for m in (stages_of or {}).get(n, self.stages)} for n in dtypes}
+        #: stage -> the variables it has
+        self.names = {m: [n for n in dtypes if m in held[n]] for m in self.stages}
+        keys = [(n, m) for m in self.stages for n in self.names[m]]
         self.pending: dict[tuple[str, int], list[np.ndarray]] = {key: [] for key in keys}
         self.received = {key: 0 for key in self.pending}
         self.emitted = dict.fromkeys(self.stages, 0)
@@ -96,11 +107,11 @@ class LineAssembler:
             self._flush(int(stage))
 
     def _flush(self, m: int) -> None:
-        upto = min(self.received[(n, m)] for n in self.dtypes)
+        upto = min(self.received[(n, m)] for n in self.names[m])
         j0 = self.emitted[m]
         if upto <= j0:
             return
-        lines = {n: self._take(n, m, upto - j0) for n in self.dtypes}
+        lines = {n: self._take(n, m, upto - j0) for n in self.names[m]}
         if "clipped" in lines:
             lines["clipped"] = lines["clipped"] | (lines["dn"] >= self.word_top)
         lines = {n: block.astype(self.dtypes[n], copy=False) for n, block in lines.items()}

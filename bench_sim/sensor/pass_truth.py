@@ -17,6 +17,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.render.exposures import RenderSetup
+from bench_sim.sensor.cumulant_kernel import light_quantities
 from bench_sim.sensor.dtdi import full_scale_dn
 from bench_sim.sensor.emva import FixedPattern
 from bench_sim.sensor.expectation import ReadModel, clipped_sum_mean, read_cumulants
@@ -69,7 +70,7 @@ class PassTruth:
 
     def __init__(
         self, cfg: BenchConfig, setup: RenderSetup, fp: FixedPattern, st: tuple[int, ...], *,
-        pedestal_dn: float, band_lines: int = 256,
+        pedestal_dn: float, band_lines: int = 256, footprint_rows: int | None = None,
     ) -> None:
         self.cfg, self.setup, self.st, self.band_lines = cfg, setup, st, int(band_lines)
         self.lines, n_cols = cfg.lines, cfg.sensor.columns
@@ -92,7 +93,8 @@ class PassTruth:
             for m in st
         }
         self.offset_stack = np.stack([self.offsets[m] for m in st])
-        self.footprints = row_footprints(cfg, setup.geom, setup.grid, st[-1])
+        # the footprints of the pass's rows (a truth of some of its stages: the same footprints)
+        self.footprints = row_footprints(cfg, setup.geom, setup.grid, footprint_rows or st[-1])
         self.gain = fp.prnu_gain
         self.qe_gain = cfg.sensor.quantum_efficiency * fp.prnu_gain
         self.dark_e = fp.dark_current_e_s * t_int
@@ -148,22 +150,28 @@ class PassTruth:
         """Per read of a chunk (C frames, R rows, N columns): the (C, R, N) quantities
         :data:`TRUTH_QUANTITIES` that the stages sum, the cumulants of every clipped read
         (:func:`bench_sim.sensor.expectation.read_cumulants`); and row 0's mean read with the
-        word's clip folded in, (C, N), when stage 1 is requested."""
-        sensor, ph = self.cfg.sensor, got.photons
-        rows = ph.shape[1]
+        word's clip folded in, (C, N), when stage 1 is requested. Only the rows of this truth's
+        highest stage are read (the pass may expose more)."""
+        sensor, rows = self.cfg.sensor, self.st[-1]
+        ph = got.photons[:, :rows]
         if self._buf is None or self._buf.shape[1:] != ph.shape:  # reused: no page faults per chunk
             self._buf = np.empty((5, *ph.shape), dtype=np.float64)
         gain_photons, light, k1, k2, k3 = self._buf
-        np.multiply(ph, self.gain[:rows], out=gain_photons)
-        np.multiply(ph, self.qe_gain[:rows], out=light)
-        dark = np.broadcast_to(self.dark_e[:rows], ph.shape)
+        # both noises or neither: one Poisson mean, light + dark (det 0); else one of them is exact
+        one_mean = sensor.shot_noise == sensor.dark_noise
+        gain, qe_gain, dark_e = (
+            np.ascontiguousarray(a[:rows]) for a in (self.gain, self.qe_gain, self.dark_e)
+        )
+        photons = np.ascontiguousarray(got.photons)  # all its rows: the loop reads the first `rows`
+        light_quantities(photons, gain, qe_gain, dark_e, gain_photons, light, add_dark=one_mean)
+        dark = np.broadcast_to(dark_e, ph.shape)
         det: np.ndarray
-        if sensor.shot_noise and not sensor.dark_noise:
+        if one_mean:
+            lam, det = light, np.zeros(())
+        elif sensor.shot_noise:
             lam, det = light, dark
-        elif sensor.dark_noise and not sensor.shot_noise:
-            lam, det = dark, light
         else:
-            lam, det = np.add(light, dark, out=light), np.zeros(())
+            lam, det = dark, light
         noisy = sensor.shot_noise or sensor.dark_noise
         k1_stage1 = None
         if 1 in self.st:  # stage 1 is one read: the word's clip folds into the read's (exact)
@@ -173,7 +181,7 @@ class PassTruth:
                 hi_dn=self.fold[1],
             )[0]
         read_cumulants(lam, det, self.offset_dn, self.read_model, noisy=noisy, out=(k1, k2, k3))
-        saturated = got.saturated if got.saturated is not None else np.zeros(ph.shape, dtype=bool)
+        saturated = got.saturated[:, :rows] if got.saturated is not None else np.zeros(ph.shape, dtype=bool)
         return [ph, gain_photons, k1, k2, k3, saturated], k1_stage1
 
     def _reflectance_bands(self, upto: int) -> list[TruthBlock]:

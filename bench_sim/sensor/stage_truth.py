@@ -38,6 +38,7 @@ from bench_sim.config import BenchConfig, SensorConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.texture import RunTexture
 from bench_sim.rig.geometry import RigGeometry, surface_angles
+from bench_sim.sensor.diagonal_sums import diagonal_sums
 from bench_sim.sensor.emva import FixedPattern
 
 if TYPE_CHECKING:  # scipy is imported where the matrices are built (it costs start-up time)
@@ -237,10 +238,11 @@ class StageSums:
     """Float DTDI sums of per-pixel quantities: for every stage ``m`` and scene line ``j``,
     ``sum_{i < m} v[frame j + i, row i]`` (paper eq. 1-2 without the output word).
 
-    Works a chunk of frames at a time, by diagonal: for row ``i = 0, 1, ...`` the chunk's row-``i``
-    values are added to scene lines ``j = k - i`` of its frames ``k`` in one vectorised step, and
-    when ``i`` reaches ``m - 1`` those lines of stage ``m`` are complete. Every line sums its rows
-    in the order ``i = 0, 1, ...`` from ``0.0``, as a per-frame ring would. Only the
+    Works a chunk of frames at a time, by diagonal (the compiled loop
+    :func:`bench_sim.sensor.diagonal_sums.diagonal_sums`): row ``i`` of frame ``k`` is added to
+    scene line ``j = k - i``, and when row ``m - 1`` of a line is in, its stage ``m`` is complete.
+    Every line sums its rows in the order ``i = 0, 1, ...`` from ``0.0``, as a per-frame ring
+    would (and as numpy slice additions row after row: the same bits). Only the
     ``max(stages) - 1`` lines in progress are carried between chunks, so memory does not grow
     with the number of lines. A chunk holds ``Q`` quantities per pixel, each (C, R, N) with
     ``R >= max(stages)`` rows.
@@ -269,13 +271,13 @@ class StageSums:
         self.block = np.empty((len(chunk), sum(sizes.values()), acc.shape[2]))
         ends = np.cumsum(list(sizes.values()))
         out = {m: self.block[:, e - n : e] for (m, n), e in zip(sizes.items(), ends, strict=True)}
+        # per row i: stage i + 1's first frame out (none: n_frames) and its block row for frame 0
+        emit_from = np.full(r_rows, n_frames, dtype=np.int64)
+        out_row0 = np.zeros(r_rows, dtype=np.int64)
+        for (m, n), e in zip(sizes.items(), ends, strict=True):
+            emit_from[m - 1], out_row0[m - 1] = firsts[m], e - n - firsts[m]
         for q, values in enumerate(chunk):  # one quantity at a time: its buffer stays in cache
-            acc_q = acc[q]
-            for i in range(r_rows):
-                lo = r_rows - 1 - i
-                acc_q[lo : lo + n_frames] += values[:, i]
-                if i + 1 in out:
-                    out[i + 1][q] = acc_q[lo + firsts[i + 1] : lo + n_frames]
+            diagonal_sums(values, r_rows, acc[q], self.block[q], emit_from, out_row0)
         self._carry = acc[:, n_frames:].copy()
         self.frames_seen = k0 + n_frames
         return out

@@ -211,6 +211,37 @@ def test_run_pass_gives_the_previous_pipelines_stage_images(truth):
     assert rng_new.integers(0, 2**62) == rng_old.integers(0, 2**62)
 
 
+def test_truth_of_some_stages_is_the_truth_of_those_stages():
+    """``truth_stages``: the truth of the fusion's two stages only (what ``reproduce`` reads) is
+    theirs in the pass with the truth of every stage, the words and the fused image's maps are
+    unchanged, and the dataset holds just those stages."""
+    from bench_sim.pipeline import run_pass
+
+    spot = {"strong": {"irradiance_w_m2": 900.0}}
+    cfg = config_from_dict(_overrides(timing={"sync_error": 0.02}, lights=spot))
+    stages, some = [1, 2, 5, 8, 12], (2, 8)  # TINY's mu1, mu2
+    full = run_pass(cfg, stages, 5, truth=True)
+    part = run_pass(cfg, stages, 5, truth=True, truth_stages=some)
+    for m in stages:
+        assert np.array_equal(part.stage_dn[m], full.stage_dn[m])
+    assert list(part.dataset.stage.values) == list(some)
+    assert part.dataset["clipped"].values.any()  # the spot clips: the clip-aware truth is exercised
+    for name in ("dn", "mean_dn", "linear_dn", "photons", "clipped", "reflectance"):
+        want = full.dataset[name].sel(stage=list(some)).values
+        assert np.array_equal(part.dataset[name].values, want), name
+    for name in ("gamma_hdr", "gamma_hdr_source"):
+        assert np.array_equal(part.dataset[name].values, full.dataset[name].values, equal_nan=True), name
+
+
+@pytest.mark.parametrize("some, problem", [((2, 7), "one of the pass's stages"), ((2, 2), "given twice")])
+def test_truth_stages_outside_the_pass_refused(some, problem):
+    from bench_sim.pipeline import run_pass
+
+    with pytest.raises(BenchSimError, match=problem) as exc:
+        run_pass(config_from_dict(_overrides()), [2, 8], 1, truth_stages=some)
+    assert "\n" not in str(exc.value)
+
+
 # --- must show 4: an image target round-trips ----------------------------------------------------
 
 

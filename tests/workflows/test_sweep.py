@@ -246,6 +246,20 @@ def test_one_and_two_workers_give_identical_points(spec_dir: Path, one_worker: P
     }
 
 
+def test_report_effects_do_not_depend_on_the_order_points_finish(spec_dir: Path, one_worker: Path) -> None:
+    """The main effects (their extremes' locations too, where means tie) follow the points'
+    order, not the order the workers finished them in."""
+    from bench_sim.workflows.sweep.plan import plan_sweep
+    from bench_sim.workflows.sweep.report import _effects
+
+    records = {int(p.stem): json.loads(p.read_text()) for p in (one_worker / "points").glob("*.json")}
+    assert len(records) == 4
+    plan = plan_sweep(spec_dir / "lights.toml", one_worker, resume=True)
+    tie = {i: {**r, "metrics": {**r["metrics"], "snr_darkest_gamma_hdr": 1.0}} for i, r in records.items()}
+    forward = _effects(plan, dict(sorted(tie.items())))
+    assert forward == _effects(plan, dict(sorted(tie.items(), reverse=True)))
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

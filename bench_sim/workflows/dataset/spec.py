@@ -69,8 +69,8 @@ from bench_sim.config import (
 )
 from bench_sim.errors import BenchSimError
 from bench_sim.io import sha256_file
-from bench_sim.pipeline import check_stages
 from bench_sim.runtime.execution import task_seed_sequence
+from bench_sim.sensor.dtdi import check_stages
 from bench_sim.workflows.dataset.splits import DEFAULT_SPLITS, check_splits
 from bench_sim.workflows.dataset.targets import check_camera
 from bench_sim.workflows.preflight import SeedField

@@ -17,28 +17,12 @@ from bench_sim.rig.target_sources import area_resize
 
 __all__ = [
     "stage_display", "fig3_stages", "fig4_hdr", "fig4_layout", "snr_versus_signal_figure", "Box",
-    "import_in_background",
 ]
 
 #: (line0, line1, col0, col1) of an inset, in output-image pixels
 Box = tuple[int, int, int, int]
 #: Largest canvas of Fig. 3 [pixels]: panels of many lines are drawn at a lower resolution
 MAX_FIGURE_PIXELS = 2.0e6
-
-
-def _import_matplotlib() -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot  # noqa: F401
-
-
-def import_in_background() -> None:
-    """Import matplotlib (Agg) in a background thread, so that a caller drawing figures at its
-    end does not wait for the import (about a second) after its computation."""
-    import threading
-
-    threading.Thread(target=_import_matplotlib, name="bench_sim-import-matplotlib", daemon=True).start()
 
 
 def stage_display(stage_dn: np.ndarray, beta: int, gamma: float = 2.2) -> np.ndarray:

@@ -46,11 +46,13 @@ def drawn(draw: Callable[[], T]) -> T:
 
 
 def warm_up() -> None:
-    """Make matplotlib's one-time set-up before the figures are due (beside the pass): its
-    mathtext parser (about half a second at its first formula) and the default font."""
+    """Make matplotlib's one-time set-up before the figures are due (beside the pass, once the
+    pass's set-up is done: not beside the set-up, whose Python it would slow): its import (about a
+    second), its mathtext parser (about half a second at its first formula) and the default font."""
     import matplotlib
 
     matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401
     from matplotlib import font_manager
     from matplotlib.mathtext import MathTextParser
 

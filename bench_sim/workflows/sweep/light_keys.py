@@ -19,7 +19,7 @@ from typing import Any
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.pipeline import check_stages
+from bench_sim.sensor.dtdi import check_stages
 
 __all__ = ["LIGHTING_KEYS", "adds_light", "check_banding_stages", "check_ratio", "light_ratio"]
 

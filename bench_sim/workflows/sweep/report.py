@@ -58,8 +58,9 @@ def _fmt(v: Any) -> str:
 
 def _effects(plan: SweepPlan, records: Mapping[int, Mapping[str, Any]]) -> list[dict[str, Any]]:
     """Per numeric metric and key: the range of the metric's mean over the key's values (the
-    main effect), over the points that finished."""
-    ok = {i: r for i, r in records.items() if r["status"] == "ok"}
+    main effect), over the points that finished. In the order of the points (not of their
+    completion), so that ties resolve alike in every run."""
+    ok = {i: records[i] for i in sorted(records) if records[i]["status"] == "ok"}
     out = []
     for col, (units, kind, _meaning) in column_docs(plan).items():
         vals = {i: as_number(r["metrics"].get(col)) for i, r in ok.items()}
@@ -185,8 +186,9 @@ def _points_section(
 
 def _report(plan: SweepPlan, records: Mapping[int, Mapping[str, Any]], sessions: Sequence[Any],
             files: Sequence[str]) -> str:
-    """The text of ``report.md``."""
+    """The text of ``report.md`` (the points in their order, whatever order they finished in)."""
     spec = plan.spec
+    records = dict(sorted(records.items()))
     ok = {i: r for i, r in records.items() if r["status"] == "ok"}
     failed = {i: r for i, r in records.items() if r["status"] != "ok"}
     lines = _head(plan, ok, failed, sessions)

@@ -1,0 +1,229 @@
+"""The on-disk store of the fast engine's light records: one file per record set, shared by the
+processes of this machine (every command, every Dask worker), so a new process finds the records
+of a scene rendered by an earlier one instead of importing Mitsuba and rendering them again.
+
+Where
+    ``<cache folder>/records/`` with the cache folder of the backend probes
+    (:mod:`bench_sim.runtime.backend`): ``$BENCH_SIM_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/bench_sim``, else ``~/.cache/bench_sim``. Removing the folder (``rm -rf``)
+    clears it; the next run renders again.
+Switch
+    ``BENCH_SIM_RECORD_CACHE=off`` (or ``0``, ``false``, ``no``) turns the store off: nothing is
+    read or written (:func:`store_dir` is ``None``). The test suite runs with it off.
+Size
+    At most ``BENCH_SIM_RECORD_CACHE_MIB`` MiB (default :data:`DEFAULT_MIB`; a value that is not
+    a non-negative number means the default): after each write the least recently used files
+    (by modification time; a load touches its file) are deleted until the rest fit.
+Files
+    ``<sha256>.npz`` (uncompressed :func:`numpy.savez`), the hash of the records' key
+    (:func:`bench_sim.render.records.records_key`) and :func:`versions` (Mitsuba, Dr.Jit and
+    bench_sim versions, :data:`FORMAT`, and a fingerprint of the source that makes the records,
+    so an edited source tree renders again). A file holds the arrays ``d_rec``, ``static``,
+    ``position`` and ``hit`` as they were rendered (same dtype, shape, bytes) and ``meta``: the
+    key, the light names and the versions as JSON, checked on load. A set loaded from here is
+    one of no renders (:func:`bench_sim.render.records.cached_records`: ``renders`` 0).
+Failures
+    The store never fails a run. A file that cannot be read (truncated, corrupt, not ours,
+    another key or versions) is a miss and is deleted if possible; a write that fails (read-only
+    or full disk) is skipped. Writes go to a temporary file in the same folder renamed into place
+    (:func:`bench_sim.io.atomic.atomic_path`), so a concurrent reader never sees half a file.
+
+Nothing here imports Mitsuba or Dr.Jit (their versions come from the installed packages'
+metadata).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import hashlib
+import json
+import os
+import re
+from collections.abc import Mapping, Sequence
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench_sim.io.atomic import atomic_path
+from bench_sim.runtime.backend import cache_folder
+from bench_sim.version import __version__
+
+__all__ = [
+    "ENV_SWITCH", "ENV_SIZE", "DEFAULT_MIB", "FORMAT", "ARRAYS", "Stored", "store_dir",
+    "versions", "load", "save", "usage",
+]
+
+#: Environment variable that turns the store off (``off``, ``0``, ``false``, ``no``).
+ENV_SWITCH = "BENCH_SIM_RECORD_CACHE"
+#: Environment variable: the store's size bound [MiB].
+ENV_SIZE = "BENCH_SIM_RECORD_CACHE_MIB"
+#: Default size bound [MiB].
+DEFAULT_MIB = 2048.0
+#: Version of the file layout; raise it when the files or the records' meaning change.
+FORMAT = 1
+
+_OFF = frozenset({"off", "0", "false", "no"})
+#: The arrays of a record set (:class:`bench_sim.render.records.LightRecords`) that are stored.
+ARRAYS = ("d_rec", "static", "position", "hit")
+#: A stored record set: its light names and its arrays (:data:`ARRAYS`), as rendered.
+Stored = tuple[tuple[str, ...], dict[str, np.ndarray]]
+_FILE = re.compile(r"[0-9a-f]{64}\.npz")
+#: The sources that make the records (relative to the package): part of the files' names.
+_SOURCES = ("render/records.py", "rig")
+
+
+def store_dir() -> Path | None:
+    """The store's folder (``<cache folder>/records``), or ``None`` when it is turned off."""
+    if os.environ.get(ENV_SWITCH, "").strip().lower() in _OFF:
+        return None
+    return cache_folder() / "records"
+
+
+def _limit_bytes() -> int:
+    try:
+        mib = float(os.environ.get(ENV_SIZE, DEFAULT_MIB))
+    except ValueError:
+        mib = DEFAULT_MIB
+    if not mib >= 0.0:  # negative or NaN
+        mib = DEFAULT_MIB
+    return int(mib * 2**20)
+
+
+def _package_version(name: str) -> str:
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "missing"
+
+
+def _source_fingerprint() -> str:
+    """sha256 of the sources that make the records (an editable install keeps its version
+    number while its code changes)."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for rel in _SOURCES:
+        p = root / rel
+        for f in sorted(p.rglob("*.py")) if p.is_dir() else [p]:
+            with contextlib.suppress(OSError):
+                h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+@functools.cache
+def versions() -> dict[str, str]:
+    """What a stored record set depends on besides its key: the Mitsuba, Dr.Jit and bench_sim
+    versions (package metadata: Mitsuba is not imported), :data:`FORMAT` and the sources'
+    fingerprint. Computed once per process."""
+    return {
+        "mitsuba": _package_version("mitsuba"),
+        "drjit": _package_version("drjit"),
+        "bench_sim": __version__,
+        "format": str(FORMAT),
+        "source": _source_fingerprint(),
+    }
+
+
+def _path(folder: Path, key: str) -> Path:
+    ident = json.dumps([key, versions()], sort_keys=True)
+    return folder / (hashlib.sha256(ident.encode()).hexdigest() + ".npz")
+
+
+def _remove(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        path.unlink()
+
+
+def _read(path: Path, key: str) -> Stored:
+    """The record set in ``path``; ``ValueError`` (or the reader's own error) when the file is
+    not a complete set of ``key`` made with these :func:`versions`."""
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"][()]))
+        arrays = {name: z[name] for name in ARRAYS}
+    d_rec, static, position, hit = (arrays[name] for name in ARRAYS)
+    if not isinstance(meta, dict) or meta.get("key") != key or meta.get("versions") != versions():
+        raise ValueError("another key or versions")
+    lights = meta.get("lights")
+    if not (isinstance(lights, list) and all(isinstance(n, str) for n in lights)):
+        raise ValueError("no light names")
+    consistent = (
+        d_rec.ndim == 3 and static.ndim == 3 and hit.dtype == np.bool_
+        and d_rec.shape[0] == static.shape[0] == len(lights)
+        and d_rec.shape[1:] == hit.shape and position.shape == (*hit.shape, 3)
+    )
+    if not consistent:
+        raise ValueError("inconsistent arrays")
+    return tuple(lights), arrays
+
+
+def load(key: str) -> Stored | None:
+    """The stored record set of ``key`` (its light names and arrays), or ``None``: the store is
+    off, has no such set, or its file cannot be read (then the file is deleted). Never raises."""
+    folder = store_dir()
+    if folder is None:
+        return None
+    try:
+        path = _path(folder, key)
+    except Exception:
+        return None
+    if not path.is_file():
+        return None
+    try:
+        rec = _read(path, key)
+    except Exception:
+        _remove(path)
+        return None
+    with contextlib.suppress(OSError):
+        os.utime(path)  # recently used: evicted last
+    return rec
+
+
+def save(key: str, lights: Sequence[str], arrays: Mapping[str, np.ndarray]) -> None:
+    """Store the record set of ``key`` (its light names and its :data:`ARRAYS`), then delete the
+    least recently used files beyond the size bound. Does nothing when the store is off; a write
+    that fails is skipped (never raises)."""
+    folder = store_dir()
+    if folder is None:
+        return
+    try:
+        path = _path(folder, key)
+        meta = json.dumps({"key": key, "lights": list(lights), "versions": versions()})
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            named: dict[str, Any] = {name: arrays[name] for name in ARRAYS}
+            np.savez(f, meta=np.array(meta), **named)
+    except Exception:  # read-only or full disk: the records are only not kept
+        return
+    _evict(folder, _limit_bytes())
+
+
+def _stored(folder: Path) -> list[tuple[int, int, Path]]:
+    """``(mtime_ns, size, path)`` of the record files in ``folder``, least recently used first."""
+    files = []
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(folder):
+            if _FILE.fullmatch(entry.name):
+                with contextlib.suppress(OSError):
+                    st = entry.stat()
+                    files.append((st.st_mtime_ns, st.st_size, Path(entry.path)))
+    return sorted(files, key=lambda t: t[0])
+
+
+def usage() -> tuple[int, int]:
+    """``(bytes, files)`` of the record sets in the store (``(0, 0)`` when it is off)."""
+    folder = store_dir()
+    files = [] if folder is None else _stored(folder)
+    return sum(size for _, size, _ in files), len(files)
+
+
+def _evict(folder: Path, limit: int) -> None:
+    """Delete the least recently used record files of ``folder`` until the rest take at most
+    ``limit`` bytes."""
+    files = _stored(folder)
+    total = sum(size for _, size, _ in files)
+    for _, size, path in files:
+        if total <= limit:
+            break
+        _remove(path)
+        total -= size
