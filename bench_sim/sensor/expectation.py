@@ -75,7 +75,7 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(_NODES)
 #: float64: both shortfalls are below ``4 phi(12) sd ~ 2e-31 sd`` (``1 - Phi(12)`` rounds to 0),
 #: far below half an ulp of ``k1`` (``|k1| >= sd``), so ``k1 + lower - upper`` rounds to ``k1``
 _FAR_SDS = 12.0
-#: Reads per block of :func:`read_cumulants`'s linear step (its scratch stays in the CPU's cache)
+#: Sums per block of :func:`clipped_sum_mean` (its scratch stays in the CPU's cache)
 _BLOCK_ELEMENTS = 16384
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench_sim.errors import BenchSimError
-from bench_sim.sensor.kernels import Scratch, joint_quantile_into
+from bench_sim.sensor.exposure_kernel import joint_quantile
 
 __all__ = [
     "box_muller_normals",
@@ -175,7 +175,8 @@ def shot_and_read_electrons(
     (cumulants ``kappa_2 = mu + sigma^2``, ``kappa_3 = kappa_4 = mu``). The normals come from
     :func:`box_muller_normals` for float32 ``mean_e`` (the quantised pixel model), from
     ``rng.standard_normal`` for float64; in float32 the expansion is evaluated by
-    :func:`bench_sim.sensor.kernels.joint_quantile_into`.
+    :func:`bench_sim.sensor.exposure_kernel.joint_quantile` (compiled, the loop the exposure
+    loop uses, so every path that makes this draw agrees bit for bit).
 
     For ``sigma >=`` :data:`COMBINED_READ_NOISE_MIN_E` the sum's skewness is at most
     :data:`SKEWNESS_MAX` at every ``mu``, so the expansion's error terms (order ``gamma^3``) are
@@ -200,4 +201,4 @@ def shot_and_read_electrons(
         return _cornish_fisher(z, lam + deterministic_e, var, lam, lam)
     z = box_muller_normals(rng, np.empty(lam.shape, dtype=np.float32))
     mean = np.asarray(lam + deterministic_e, dtype=np.float32)
-    return joint_quantile_into(z, mean, var, lam, Scratch.of(lam.shape, lam.dtype))
+    return joint_quantile(z, mean, var, lam, np.empty(lam.shape, dtype=lam.dtype))

@@ -103,20 +103,25 @@ def test_reflectance_of_a_uniform_texture_is_its_value(tiny_footprints):
     np.testing.assert_allclose(out, 0.37, rtol=1e-12)
 
 
-def test_read_cumulants_do_not_depend_on_the_block_size(monkeypatch):
-    """The linear step works in cache-sized blocks; any block size (and writing into ``out``)
-    gives the same cumulants bit for bit, near-clip reads included."""
+def test_read_cumulants_into_out_and_clipped_sum_mean_in_any_block_size(monkeypatch):
+    """``read_cumulants`` writing into ``out`` gives its cumulants bit for bit, near-clip reads
+    included; :func:`clipped_sum_mean` works in cache-sized blocks, and any block size gives the
+    same means bit for bit."""
     rm = ReadModel(gain_dn_per_e=0.07, full_well_e=13500.0, read_noise_e=6.0, top_dn=1023.0,
                    quantization=True)
     rng = np.random.default_rng(2)
     lam = np.concatenate([rng.uniform(0, 40, (3, 50)), rng.uniform(0, 16000, (5, 50))])
     off = rng.normal(8.0, 2.0, 50)
     ref = read_cumulants(lam, 0.0, off, rm)
-    monkeypatch.setattr(expectation, "_BLOCK_ELEMENTS", 7)
     outs = tuple(np.empty(lam.shape) for _ in range(3))
-    small = read_cumulants(lam, 0.0, off, rm, out=outs)
-    for x, y, o in zip(ref, small, outs, strict=True):
+    into = read_cumulants(lam, 0.0, off, rm, out=outs)
+    for x, y, o in zip(ref, into, outs, strict=True):
         assert x.tobytes() == y.tobytes() and y is o
+    sums = [8 * k for k in ref]  # sums of 8 such reads: some near or beyond the clips below
+    whole = clipped_sum_mean(*sums, 60.0, 7000.0)
+    assert np.any(whole != sums[0])  # the clips matter somewhere
+    monkeypatch.setattr(expectation, "_BLOCK_ELEMENTS", 7)
+    assert clipped_sum_mean(*sums, 60.0, 7000.0).tobytes() == whole.tobytes()
 
 
 def test_clipped_sum_mean_far_from_both_clips_is_the_mean():
