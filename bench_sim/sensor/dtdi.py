@@ -87,6 +87,7 @@ __all__ = [
     "validate_stages",
     "check_stages",
     "check_stage_subset",
+    "word_shift_dn",
     "stage_pedestals",
     "stage_mean_var_dn",
     "stage_dark_std_dn",
@@ -176,8 +177,9 @@ def stage_pedestals(pedestal_dn: Pedestal, stages: Sequence[int]) -> dict[int, f
     return out
 
 
-def _word_shift(stage: int, black_offset_dn: float, subtract_black: bool, pedestal_dn: float) -> float:
-    """The shift [DN] added to stage ``m``'s row sum: the pedestal, less ``m b`` if subtracted."""
+def word_shift_dn(stage: int, black_offset_dn: float, subtract_black: bool, pedestal_dn: float) -> float:
+    """The shift [DN] added to stage ``m``'s row sum to make its word (eq. 4): the pedestal
+    ``P``, less ``m b`` when the black offset is subtracted."""
     return float(pedestal_dn) - (stage * float(black_offset_dn) if subtract_black else 0.0)
 
 
@@ -186,7 +188,7 @@ def _finish(
     pedestal_dn: float,
 ) -> np.ndarray:
     """Raw row sums -> stored words: subtract m*b, add the pedestal, round, clip (eq. 4)."""
-    shift = _word_shift(stage, black_offset_dn, subtract_black, pedestal_dn)
+    shift = word_shift_dn(stage, black_offset_dn, subtract_black, pedestal_dn)
     val = sums.astype(np.float64)  # exact for the integer sums of the accumulator
     if shift != 0.0:
         val += shift
@@ -391,7 +393,7 @@ class DTDIAccumulator:
         for (m, first), e in zip(firsts.items(), ends, strict=True):
             out[m] = words[e - (n_frames - first) : e]
             emit_from[m - 1], out_row0[m - 1] = first, e - n_frames
-            shifts[m - 1] = _word_shift(m, self.black_offset_dn, self.subtract_black, self.pedestal_dn[m])
+            shifts[m - 1] = word_shift_dn(m, self.black_offset_dn, self.subtract_black, self.pedestal_dn[m])
         top = float(word_clip_dn(self.beta_bits))
         diagonal_sums(chunk, r_rows, win, words, emit_from, out_row0, shifts, top)
         self._origin += n_frames

@@ -18,7 +18,7 @@ import numpy as np
 from bench_sim.config import BenchConfig
 from bench_sim.render.exposures import RenderSetup
 from bench_sim.sensor.cumulant_kernel import light_quantities
-from bench_sim.sensor.dtdi import full_scale_dn
+from bench_sim.sensor.dtdi import full_scale_dn, word_shift_dn
 from bench_sim.sensor.emva import FixedPattern
 from bench_sim.sensor.expectation import ReadModel, clipped_sum_mean, read_cumulants
 from bench_sim.sensor.stage_truth import (
@@ -78,8 +78,10 @@ class PassTruth:
         self.sums = StageSums(n_cols, st, len(TRUTH_QUANTITIES))
         self.read_model = ReadModel.of(cfg.sensor)
         black = cfg.sensor.black_offset_dn if cfg.dtdi.subtract_black else 0.0
-        #: the word's shift (- m b + P) per stage, and the word's clip folded into one read (m = 1)
-        self.shift = {m: ped - m * black for m in st}
+        #: the word's shift per stage, and the word's clip folded into one read (m = 1)
+        self.shift = {
+            m: word_shift_dn(m, cfg.sensor.black_offset_dn, cfg.dtdi.subtract_black, ped) for m in st
+        }
         self.word = float(full_scale_dn(beta) - 1)
         top = min(self.read_model.top_dn, self.word + black - ped)
         self.fold = (max(0.0, black - ped), top)
