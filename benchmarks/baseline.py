@@ -121,6 +121,26 @@ def first_record_s(folder: Path, started: float) -> float:
     return min(stamps) - started if stamps else float("nan")
 
 
+def workflow_run(
+    sides: Sequence[Side], side: Side, i: int, tmp: Path, command: str, spec: Path, workers: int,
+    records: str, unit: str, first: dict[str, list[float]], check: Callable[[Path], None],
+) -> tuple[float, float]:
+    """Run ``i`` of ``side``: one whole ``bench-sim COMMAND SPEC --out DIR --workers N`` process
+    into ``tmp``; ``check(DIR)`` raises when the run did not finish its work. Appends the time to
+    the first record in ``DIR/records`` to ``first[side.name]``, prints a line (``unit``: what a
+    record is) and returns (wall, CPU) [s]."""
+    out = tmp / f"{'ab'[sides.index(side)]}_{i}"
+    started = time.time()
+    # cwd: a folder without a bench_sim package (``python -m`` puts the cwd first on sys.path,
+    # ahead of the side's PYTHONPATH: run from the checkout, both sides would be the checkout)
+    wall, cpu = side.bench_sim(command, str(spec), "--out", str(out), "--workers", str(workers), cwd=tmp)
+    check(out)
+    first[side.name].append(first_record_s(out / records, started))
+    print(f"  {side.name:<22} run {i}: {wall:6.1f} s wall, {cpu:6.1f} s CPU, first {unit} after "
+          f"{first[side.name][-1]:5.1f} s ({load_line()})", flush=True)
+    return wall, cpu
+
+
 def print_rates(sides: Sequence[Side], times: dict[str, list[tuple[float, float]]],
                 first: dict[str, list[float]], n: int, unit: str,
                 extra: tuple[str, dict[str, int]] | None = None) -> None:

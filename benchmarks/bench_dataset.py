@@ -26,12 +26,11 @@ import os
 import shutil
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baseline import Side, add_baseline_args, first_record_s, load_line, paired, print_rates  # noqa: E402
+from baseline import Side, add_baseline_args, load_line, paired, print_rates, workflow_run  # noqa: E402
 
 from bench_sim.config import SCENES_DIR  # noqa: E402
 from bench_sim.workflows.dataset.reader import read_records  # noqa: E402
@@ -85,19 +84,13 @@ def main() -> None:
     first: dict[str, list[float]] = {s.name: [] for s in sides}
 
     def run(side: Side, i: int) -> tuple[float, float]:
-        out = tmp / f"{'ab'[sides.index(side)]}_{i}"
-        started = time.time()
-        # cwd: a folder without a bench_sim package (``python -m`` puts the cwd first on sys.path,
-        # ahead of the side's PYTHONPATH: run from the checkout, both sides would be the checkout)
-        wall, cpu = side.bench_sim("dataset", str(spec), "--out", str(out), "--workers", str(a.workers),
-                                   cwd=tmp)
-        done = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
-        if done != n:
-            raise RuntimeError(f"{side.name}: {done} of {n} samples complete")
-        first[side.name].append(first_record_s(out / "samples", started))
-        print(f"  {side.name:<22} run {i}: {wall:6.1f} s wall, {cpu:6.1f} s CPU, first sample after "
-              f"{first[side.name][-1]:5.1f} s ({load_line()})", flush=True)
-        return wall, cpu
+        def check(out: Path) -> None:
+            done = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
+            if done != n:
+                raise RuntimeError(f"{side.name}: {done} of {n} samples complete")
+
+        return workflow_run(sides, side, i, tmp, "dataset", spec, a.workers, "samples", "sample", first,
+                            check)
 
     print(f"dataset of {n} samples of the example spec (256 x 256, stages 10 and 80), {a.workers} workers, "
           f"each run a bench-sim process; {load_line()}", flush=True)

@@ -29,12 +29,11 @@ import json
 import shutil
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baseline import Side, add_baseline_args, first_record_s, load_line, paired, print_rates  # noqa: E402
+from baseline import Side, add_baseline_args, load_line, paired, print_rates, workflow_run  # noqa: E402
 
 from bench_sim.config import SCENES_DIR  # noqa: E402
 
@@ -67,20 +66,13 @@ def main() -> None:
     renders: dict[str, int] = {}
 
     def run(side: Side, i: int) -> tuple[float, float]:
-        out = tmp / f"{'ab'[sides.index(side)]}_{i}"
-        started = time.time()
-        # cwd: a folder without a bench_sim package (``python -m`` puts the cwd first on sys.path,
-        # ahead of the side's PYTHONPATH: run from the checkout, both sides would be the checkout)
-        wall, cpu = side.bench_sim("sweep", str(spec), "--out", str(out), "--workers", str(a.workers),
-                                   cwd=tmp)
-        meta = json.loads((out / "sweep.json").read_text())
-        if meta["ok"] != a.points:
-            raise RuntimeError(f"{side.name}: {meta['ok']} of {a.points} points ok")
-        first[side.name].append(first_record_s(out / "points", started))
-        renders[side.name] = int(meta["mitsuba_renders"])
-        print(f"  {side.name:<22} run {i}: {wall:6.1f} s wall, {cpu:6.1f} s CPU, first point after "
-              f"{first[side.name][-1]:5.1f} s ({load_line()})", flush=True)
-        return wall, cpu
+        def check(out: Path) -> None:
+            meta = json.loads((out / "sweep.json").read_text())
+            if meta["ok"] != a.points:
+                raise RuntimeError(f"{side.name}: {meta['ok']} of {a.points} points ok")
+            renders[side.name] = int(meta["mitsuba_renders"])
+
+        return workflow_run(sides, side, i, tmp, "sweep", spec, a.workers, "points", "point", first, check)
 
     print(f"{a.points}-point light-power sweep (8 .. {a.max_power:g} W/m^2) at --quick size, "
           f"{a.workers} workers, each run a bench-sim process; {load_line()}", flush=True)
