@@ -26,6 +26,7 @@ for bit with numpy.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -33,7 +34,7 @@ from numpy.lib.stride_tricks import as_strided
 
 from bench_sim.runtime.jit import compiled
 
-__all__ = ["diagonal_sums", "frame_rows", "LOOPS"]
+__all__ = ["diagonal_sums", "frame_rows", "stage_blocks", "LOOPS"]
 
 
 def _signature(values: str, sums: str, out: str) -> str:
@@ -104,6 +105,27 @@ _INPUT_FOR_SUM: dict[np.dtype, np.dtype] = {
     np.dtype(np.int64): np.dtype(np.int64),
     np.dtype(np.float64): np.dtype(np.float64),
 }
+
+
+def stage_blocks(
+    stages: Sequence[int], frames_seen: int, n_frames: int, rows: int
+) -> tuple[dict[int, slice], np.ndarray, np.ndarray]:
+    """Where a chunk's completed lines go: one output block of every stage's lines, stage by
+    stage (``stages`` ascending).
+
+    Frame ``t`` of a chunk starting at frame ``frames_seen`` completes line ``frames_seen + t -
+    m + 1`` of stage ``m``; lines before 0 are left out. Returns stage ``m`` -> its rows of the
+    block, and the ``emit_from``, ``out_row0`` arrays (``rows``,) of :func:`diagonal_sums`.
+    """
+    emit_from = np.full(rows, n_frames, dtype=np.int64)  # rows that are no stage: none out
+    out_row0 = np.zeros(rows, dtype=np.int64)
+    blocks, end = {}, 0
+    for m in stages:
+        first = min(max(m - 1 - frames_seen, 0), n_frames)  # its first frame with a line >= 0
+        blocks[m] = slice(end, end + n_frames - first)
+        emit_from[m - 1], out_row0[m - 1] = first, end - first
+        end += n_frames - first
+    return blocks, emit_from, out_row0
 
 
 def frame_rows(values: np.ndarray, rows: int) -> tuple[np.ndarray, int]:

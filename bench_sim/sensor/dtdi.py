@@ -66,7 +66,7 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from bench_sim.errors import BenchSimError
-from bench_sim.sensor.diagonal_sums import diagonal_sums
+from bench_sim.sensor.diagonal_sums import diagonal_sums, stage_blocks
 from bench_sim.sensor.model import (
     check_beta_bits,
     full_scale_dn,
@@ -382,17 +382,12 @@ class DTDIAccumulator:
         if n_frames == 0:
             return {m: np.zeros((0, self.n_columns), dtype=np.uint32) for m in self.stages}
         win = self._window(n_frames, self._sum_dtype(chunk.dtype))
-        # stage m (row i = m - 1) completes lines k0 + t - i for frames t >= i - k0 (line >= 0)
-        firsts = {m: min(max(m - 1 - k0, 0), n_frames) for m in self.stages}
-        ends = np.cumsum([n_frames - f for f in firsts.values()])
-        words = np.empty((int(ends[-1]), self.n_columns), dtype=np.uint32)  # all stages' lines
-        emit_from = np.full(r_rows, n_frames, dtype=np.int64)
-        out_row0 = np.zeros(r_rows, dtype=np.int64)
+        blocks, emit_from, out_row0 = stage_blocks(self.stages, k0, n_frames, r_rows)
+        # all stages' lines in one array (the blocks are views into it)
+        words = np.empty((max(b.stop for b in blocks.values()), self.n_columns), dtype=np.uint32)
+        out = {m: words[b] for m, b in blocks.items()}
         shifts = np.zeros(r_rows, dtype=np.float64)
-        out = {}
-        for (m, first), e in zip(firsts.items(), ends, strict=True):
-            out[m] = words[e - (n_frames - first) : e]
-            emit_from[m - 1], out_row0[m - 1] = first, e - n_frames
+        for m in self.stages:
             shifts[m - 1] = word_shift_dn(m, self.black_offset_dn, self.subtract_black, self.pedestal_dn[m])
         top = float(word_clip_dn(self.beta_bits))
         diagonal_sums(chunk, r_rows, win, words, emit_from, out_row0, shifts, top)

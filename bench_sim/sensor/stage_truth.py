@@ -38,7 +38,7 @@ from bench_sim.config import BenchConfig, SensorConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.texture import RunTexture
 from bench_sim.rig.geometry import RigGeometry, surface_angles
-from bench_sim.sensor.diagonal_sums import diagonal_sums
+from bench_sim.sensor.diagonal_sums import diagonal_sums, stage_blocks
 from bench_sim.sensor.emva import FixedPattern
 
 if TYPE_CHECKING:  # scipy is imported where the matrices are built (it costs start-up time)
@@ -264,18 +264,10 @@ class StageSums:
         k0 = self.frames_seen
         acc = np.zeros((len(chunk), r_rows - 1 + n_frames, chunk[0].shape[2]), dtype=np.float64)
         acc[:, : r_rows - 1] = self._carry
-        # lines k0 - i + first .. of stage i + 1 are >= 0; buffer index of line k0 - i: R - 1 - i
-        firsts = {m: max(0, m - 1 - k0) for m in self.stages}
-        sizes = {m: max(n_frames - f, 0) for m, f in firsts.items()}
+        blocks, emit_from, out_row0 = stage_blocks(self.stages, k0, n_frames, r_rows)
         #: the completed lines of all stages, one block (stage by stage, as ``out``'s views)
-        self.block = np.empty((len(chunk), sum(sizes.values()), acc.shape[2]))
-        ends = np.cumsum(list(sizes.values()))
-        out = {m: self.block[:, e - n : e] for (m, n), e in zip(sizes.items(), ends, strict=True)}
-        # per row i: stage i + 1's first frame out (none: n_frames) and its block row for frame 0
-        emit_from = np.full(r_rows, n_frames, dtype=np.int64)
-        out_row0 = np.zeros(r_rows, dtype=np.int64)
-        for (m, n), e in zip(sizes.items(), ends, strict=True):
-            emit_from[m - 1], out_row0[m - 1] = firsts[m], e - n - firsts[m]
+        self.block = np.empty((len(chunk), max(b.stop for b in blocks.values()), acc.shape[2]))
+        out = {m: self.block[:, b] for m, b in blocks.items()}
         for q, values in enumerate(chunk):  # one quantity at a time: its buffer stays in cache
             diagonal_sums(values, r_rows, acc[q], self.block[q], emit_from, out_row0)
         self._carry = acc[:, n_frames:].copy()
