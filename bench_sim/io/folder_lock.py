@@ -24,6 +24,7 @@ import errno
 import json
 import os
 import socket
+import stat
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -45,6 +46,15 @@ _HELD: dict[Path, int] = {}
 
 class FolderBusyError(BenchSimError):
     """Another run holds the output folder's lock (the message names it)."""
+
+
+class _AimedLock(BenchSimError):
+    """The lock path is not a regular file of this user (a link, a FIFO, another user's file):
+    it is never opened through, written or truncated."""
+
+    def __init__(self, path: Path, why: str) -> None:
+        super().__init__(f"{path}: the lock file is {why}; bench_sim never writes through it: remove it "
+                         "if it is not yours, or choose another folder")
 
 
 def lock_path(out: str | os.PathLike[str]) -> Path:
@@ -71,8 +81,18 @@ def _describe(owner: dict[str, Any] | None) -> str:
 def _try_lock(path: Path) -> int | None:
     """Open and lock ``path``; the descriptor, ``None`` if the file was replaced meanwhile.
     Raises ``BlockingIOError`` when another process holds it."""
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:  # never through a link, never blocking on a FIFO
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise _AimedLock(path, "a symbolic link") from None
+        raise
     try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise _AimedLock(path, "not a regular file")
+        if st.st_uid != os.getuid():
+            raise _AimedLock(path, f"owned by another user (uid {st.st_uid})")
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         try:
             same = os.stat(path).st_ino == os.fstat(fd).st_ino
@@ -94,6 +114,8 @@ def _acquire(out: Path, command: str, what: str) -> int:
         for _ in range(100):
             try:
                 fd = _try_lock(path)
+            except _AimedLock as exc:
+                raise BenchSimError(f"{what} = {str(out)!r}: {exc}") from None
             except BlockingIOError:
                 raise FolderBusyError(
                     f"{what} = {str(out)!r}: in use by {_describe(lock_owner(out))}; wait for it to end "

@@ -177,6 +177,28 @@ def read_png_text(path: str | os.PathLike[str]) -> dict[str, Any]:
     return json.loads(text) if text else {}
 
 
+def carries_provenance(path: str | os.PathLike[str]) -> bool:
+    """Whether the image ``path`` carries bench_sim's provenance (an EXR, TIFF or PNG that
+    bench_sim wrote: its ``bench_sim`` attribute, description or text chunk with a ``version``);
+    ``False`` for anything else, unreadable files included."""
+    suffix = Path(path).suffix.lower()
+    try:
+        if suffix == ".exr":
+            meta = read_exr(path)[1]
+        elif suffix == ".png":
+            meta = read_png_text(path)
+        elif suffix in (".tif", ".tiff"):
+            import tifffile
+
+            with tifffile.TiffFile(path) as tif:
+                meta = json.loads(getattr(tif.pages.first, "description", "") or "{}")
+        else:
+            return False
+    except Exception:  # a foreign or damaged file: not ours
+        return False
+    return isinstance(meta, dict) and "version" in meta
+
+
 def image_file_problem(path: str | os.PathLike[str]) -> str | None:
     """Why ``path`` cannot be read as an image (``"no such file"``, ``"unsupported file type
     ..."``, ``"not readable"``), or ``None``: the one check of an input image file, before

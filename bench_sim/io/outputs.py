@@ -17,7 +17,6 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
-import json
 import os
 import shutil
 import tempfile
@@ -38,7 +37,16 @@ from bench_sim.io.atomic import (
     write_failure,
 )
 from bench_sim.io.files import format_bytes, write_json
+from bench_sim.io.images import carries_provenance
 from bench_sim.io.interrupts import deferred_interrupts
+from bench_sim.io.ownership import (
+    OUTPUT_MARKER,
+    entries,
+    listed_files,
+    read_output_record,
+    refuse_foreign,
+    remove_listed,
+)
 
 __all__ = [
     "OUTPUT_MARKER",
@@ -49,10 +57,6 @@ __all__ = [
     "output_set",
     "read_output_record",
 ]
-
-#: File written last into every output folder made by :func:`output_set`; its presence marks a
-#: complete set, and only folders holding it (or empty ones) are ever replaced by a rerun.
-OUTPUT_MARKER = ".bench-sim-output.json"
 
 _RENAME_EXCHANGE = 2
 
@@ -93,31 +97,13 @@ def _probe_writable(folder: Path, what: str, out: Path) -> None:
         raise OutputWriteError(f"{what} = {str(out)!r}: cannot write in {folder} ({reason})") from None
 
 
-#: files whose provenance marks a folder written by a bench_sim older than the completion record
-_LEGACY_RECORDS = ("metrics.json", "meta.json", "ptc_results.json")
-
-
-def _written_by_bench_sim(out: Path) -> bool:
-    """``out`` holds a bench_sim output set: its completion record, or (sets written before the
-    record existed) a JSON file carrying bench_sim's provenance."""
-    if (out / OUTPUT_MARKER).is_file():
-        return True
-    for name in _LEGACY_RECORDS:
-        try:
-            data = json.loads((out / name).read_text())
-        except (OSError, ValueError):
-            continue
-        if isinstance(data, dict) and {"version", "config_sha256"} <= data.keys():
-            return True
-    return False
-
-
 def check_output_dir(out: str | os.PathLike[str], what: str = "--out") -> Path:
     """Check, before any computation, that ``out`` can receive an output set.
 
     Returns the resolved path. Raises :class:`BenchSimError` (one line) when ``out`` is a file,
-    lies under a file, is a non-empty folder that bench_sim did not write, is the current folder
-    or one that holds it, or the folder that will hold it cannot be written.
+    lies under a file, is a non-empty folder holding anything its bench_sim record does not list
+    (:mod:`bench_sim.io.ownership`), is the current folder or one that holds it, or the folder
+    that will hold it cannot be written.
     """
     given = str(out)
     if not given.strip():
@@ -143,18 +129,19 @@ def check_output_dir(out: str | os.PathLike[str], what: str = "--out") -> Path:
             busy = any(out.iterdir())
         except OSError as exc:
             raise BenchSimError(f"{what} = {given!r}: cannot list the folder ({exc.strerror})") from None
-        if busy and not _written_by_bench_sim(out):
-            raise BenchSimError(
-                f"{what} = {given!r}: folder exists, is not empty and was not written by bench_sim "
-                "(a rerun replaces the whole folder): choose a new or empty folder"
-            )
+        if busy:
+            refuse_foreign(out, what)
     _probe_writable(_nearest_existing(out.parent), what, out)
     return out
 
 
-def check_output_file(path: str | os.PathLike[str], what: str, suffix: str) -> Path:
+def check_output_file(
+    path: str | os.PathLike[str], what: str, suffix: str, inputs: Sequence[Path] = ()
+) -> Path:
     """Check, before any computation, that the file ``path`` (with ``suffix``) can be written:
-    not a folder, not under a file, its folder writable. Returns the absolute path."""
+    not a folder, not under a file, not one of ``inputs``, its folder writable, and not an
+    existing file that bench_sim did not write (only a file carrying our provenance is replaced).
+    Returns the absolute path."""
     given = str(path)
     p = Path(path).expanduser()
     if p.suffix.lower() != suffix:
@@ -162,6 +149,15 @@ def check_output_file(path: str | os.PathLike[str], what: str, suffix: str) -> P
         raise BenchSimError(f"{what} = {given}: must be a {suffix} file (got '{got}')")
     if p.is_dir():
         raise BenchSimError(f"{what} = {given}: is a directory; give a {suffix} file name")
+    if p.resolve() in {q.resolve() for q in inputs}:
+        raise BenchSimError(f"{what} = {given}: is one of the input files; choose another name")
+    if p.is_symlink() or (p.exists() and not p.is_file()):
+        raise BenchSimError(f"{what} = {given}: is a link or a special file; give a new {suffix} file name")
+    if p.exists() and not carries_provenance(p):
+        raise BenchSimError(
+            f"{what} = {given}: exists and was not written by bench_sim (it carries no bench_sim "
+            "provenance), so it is not overwritten: give a new file name"
+        )
     parent = _nearest_existing(p.absolute().parent)
     if not parent.is_dir():
         raise BenchSimError(f"{what} = {given}: {parent} is not a directory")
@@ -169,35 +165,34 @@ def check_output_file(path: str | os.PathLike[str], what: str, suffix: str) -> P
     return p.absolute()
 
 
-def read_output_record(out: str | os.PathLike[str]) -> dict[str, Any] | None:
-    """The completion record of the output set in ``out``; ``None`` if ``out`` holds no complete
-    set (readers of a folder written in place check it before trusting the files)."""
-    try:
-        data = json.loads((Path(out) / OUTPUT_MARKER).read_text())
-    except (OSError, ValueError):
-        return None
-    return data if isinstance(data, dict) else None
-
-
-def _replace_set(tmp: Path, out: Path) -> None:
+def _replace_set(tmp: Path, out: Path, what: str) -> None:
     """Put the complete set ``tmp`` in the place of ``out``: a rename where ``out`` is absent, an
     atomic exchange where the file system has one, else ``out`` moved aside (into a locked
     ``.NAME.old-PID-XXXX`` folder, put back by the next run if this one is killed) and two
-    renames."""
+    renames. ``out`` is checked once more first (an entry that appeared in it during the run is
+    not ours: refused); of the previous set only the files its record lists are removed."""
     if not out.exists():
         os.replace(tmp, out)
-    elif _exchange(tmp, out):
-        shutil.rmtree(tmp, ignore_errors=True)  # tmp now holds the previous set
-    else:
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
-        old_fd = os.open(old, os.O_RDONLY)
-        _lock(old_fd)
-        try:
-            os.replace(out, old / "set")
-            os.replace(tmp, out)
-            shutil.rmtree(old, ignore_errors=True)
-        finally:
-            os.close(old_fd)
+        return
+    if any(out.iterdir()):
+        refuse_foreign(out, what)
+    old_files = listed_files(out) or []
+    if _exchange(tmp, out):
+        left = remove_listed(tmp, old_files)  # tmp now holds the previous set
+        if left:  # pragma: no cover - an entry added between the check and the exchange
+            os.replace(tmp, out.with_name(f"{out.name}.kept-{os.getpid()}"))
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
+    old_fd = os.open(old, os.O_RDONLY)
+    _lock(old_fd)
+    try:
+        os.replace(out, old / "set")
+        os.replace(tmp, out)
+        if remove_listed(old / "set", old_files):  # pragma: no cover - as above
+            os.replace(old / "set", out.with_name(f"{out.name}.kept-{os.getpid()}"))
+        shutil.rmtree(old, ignore_errors=True)
+    finally:
+        os.close(old_fd)
 
 
 @contextlib.contextmanager
@@ -241,10 +236,10 @@ def output_set(
         _OPEN_SETS.append(tmp)
     try:
         yield tmp
-        write_json(tmp / OUTPUT_MARKER, dict(record or {}))
+        write_json(tmp / OUTPUT_MARKER, {**dict(record or {}), "files": entries(tmp)})
         _fault("commit", out)
         os.chmod(tmp, 0o777 & ~umask())  # mkdtemp creates 0700
-        _replace_set(tmp, out)
+        _replace_set(tmp, out, what)
     except BaseException as exc:
         with deferred_interrupts():  # a second Ctrl-C must not cut the clean-up short
             shutil.rmtree(tmp, ignore_errors=True)

@@ -140,14 +140,9 @@ def _check_options(
 
 def _check_outputs(low_p: Path, high_p: Path, out_p: Path, tra_p: Path | None) -> None:
     """The output files writable, of the right kinds, and none of them an input or each other."""
-    check_output_file(out_p, "--out", ".exr")
-    inputs = {low_p.resolve(), high_p.resolve()}
-    if out_p.resolve() in inputs:
-        raise BenchSimError(f"--out = {out_p}: is one of the input files; choose another name")
+    check_output_file(out_p, "--out", ".exr", inputs=(low_p, high_p))
     if tra_p is not None:
-        check_output_file(tra_p, "--tra", ".png")
-        if tra_p.resolve() in inputs:
-            raise BenchSimError(f"--tra = {tra_p}: is one of the input files; choose another name")
+        check_output_file(tra_p, "--tra", ".png", inputs=(low_p, high_p))
         if tra_p.resolve() == out_p.resolve():
             raise BenchSimError(f"--tra = {tra_p}: same file as --out")
 

@@ -49,7 +49,7 @@ def test_a_rerun_replaces_the_whole_set(
     _write_set(out, {"ground_truth.exr": "1", "stage_001/a.tif": "1", "meta.json": "1"}, {"seed": 1})
     _write_set(out, {"meta.json": "2", "stage_002/a.tif": "2"}, {"seed": 2})
     assert set(_tree(out)) == {"meta.json", "stage_002/a.tif", OUTPUT_MARKER}  # nothing of run 1 left
-    assert read_output_record(out) == {"seed": 2}
+    assert read_output_record(out) == {"seed": 2, "files": ["meta.json", "stage_002/a.tif"]}
     assert _temporaries(tmp_path) == []
     assert oct(out.stat().st_mode & 0o777) == oct(0o777 & ~umask())
 
@@ -175,16 +175,47 @@ def test_atomic_exchange_swaps_two_folders(tmp_path: Path) -> None:
         assert (a / "x").read_text() == "a"
 
 
-def test_a_folder_from_before_the_completion_record_is_recognised(tmp_path: Path) -> None:
-    """``results/paper`` of earlier versions has no record but metrics.json with provenance."""
-    old = tmp_path / "paper"
-    old.mkdir()
-    (old / "metrics.json").write_text('{"version": "0.1.0", "config_sha256": "ab", "seed": 0}')
-    (old / "fig3_stages.png").write_bytes(b"png")
-    _write_set(old, {"metrics.json": "{}"})
-    assert set(_tree(old)) == {"metrics.json", OUTPUT_MARKER}
-    other = tmp_path / "other"
-    other.mkdir()
-    (other / "metrics.json").write_text('{"loss": 0.1}')  # someone else's metrics
+def test_a_folder_without_a_file_list_is_never_replaced(tmp_path: Path) -> None:
+    """Only what a record lists is ours: an output of bench_sim 0.1 (provenance in metrics.json,
+    no record) and of 0.3 (a record without ``files``) are refused, their files untouched."""
+    legacy = tmp_path / "paper"
+    legacy.mkdir()
+    (legacy / "metrics.json").write_text('{"version": "0.1.0", "config_sha256": "ab", "seed": 0}')
     with pytest.raises(BenchSimError, match="not written by bench_sim"):
-        _write_set(other, {"a.txt": "x"})
+        _write_set(legacy, {"metrics.json": "{}"})
+    v03 = tmp_path / "v03"
+    v03.mkdir()
+    (v03 / OUTPUT_MARKER).write_text('{"command": "reproduce", "version": "0.3.0"}')
+    (v03 / "fig3_stages.png").write_bytes(b"png")
+    with pytest.raises(BenchSimError, match="older bench_sim whose record does not list its files"):
+        _write_set(v03, {"a.txt": "x"})
+    assert (v03 / "fig3_stages.png").read_bytes() == b"png" and (legacy / "metrics.json").is_file()
+
+
+@pytest.mark.parametrize("exchange", [True, False], ids=["renameat2 exchange", "two renames"])
+def test_a_file_added_to_a_set_keeps_the_set_from_being_replaced(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, exchange: bool
+) -> None:
+    """A user's file put into an output folder (or a subfolder of it) makes it not wholly ours:
+    the rerun is refused in one line naming the file, which stays."""
+    if not exchange:
+        monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)
+    out = tmp_path / "out"
+    _write_set(out, {"meta.json": "1", "stage_001/a.tif": "1"})
+    (out / "stage_001" / "notes.txt").write_text("precious")
+    with pytest.raises(BenchSimError, match=r"holds 'stage_001/notes.txt', which bench_sim did not write"):
+        _write_set(out, {"meta.json": "2"})
+    assert (out / "stage_001" / "notes.txt").read_text() == "precious"
+    assert (out / "meta.json").read_text() == "1"
+
+
+def test_a_file_added_during_the_run_is_kept(tmp_path: Path) -> None:
+    """The folder is checked again when the new set is put in place: an entry that appeared in
+    it while the run worked is not removed (the run is refused, the previous set stays)."""
+    out = tmp_path / "out"
+    _write_set(out, {"meta.json": "1"})
+    with pytest.raises(BenchSimError, match="draft.md"), output_set(out, {"command": "test"}) as tmp:
+        bio.write_text(tmp / "meta.json", "2")
+        (out / "draft.md").write_text("written meanwhile")
+    assert (out / "draft.md").read_text() == "written meanwhile" and (out / "meta.json").read_text() == "1"
+    assert _temporaries(tmp_path) == []

@@ -66,6 +66,7 @@ __all__ = [
     "THUMBNAILS",
     "COMPLETION_RECORD",
     "DATASET_KIND",
+    "DATASET_FILES",
     "STAGE_VARIABLES",
     "FUSED_VARIABLES",
     "variable_meta",
@@ -88,6 +89,12 @@ THUMBNAILS = "thumbnails.png"
 COMPLETION_RECORD = OUTPUT_MARKER
 #: ``kind`` of ``dataset.json``: how a folder is recognised as a bench_sim dataset
 DATASET_KIND = "bench_sim dataset"
+#: Everything a dataset folder may hold (patterns of :mod:`bench_sim.io.ownership`): a folder
+#: holding anything else is never replaced or written into
+DATASET_FILES = (
+    DATASET_JSON, f"{DATA_STORE}/**", f"{RECORDS_DIR}/[0-9]*.json", MANIFEST_PARQUET, MANIFEST_CSV,
+    f"{MANIFEST_CSV}.json", CARD, THUMBNAILS,
+)
 
 
 

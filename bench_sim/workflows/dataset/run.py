@@ -47,6 +47,7 @@ from bench_sim.config import BenchConfig, config_sha256
 from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import check_free_space, format_bytes, write_json
 from bench_sim.io.folder_lock import folder_lock
+from bench_sim.io.ownership import entries
 from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
 from bench_sim.pipeline import run_pass
 from bench_sim.render.exposures import fast_records, records_group
@@ -394,7 +395,7 @@ def _plan_and_run(
     if run.complete == spec.samples:
         write_json(out / COMPLETION_RECORD, {
             "command": "dataset", "version": meta["version"], "seed": spec.seed,
-            "spec_sha256": meta["spec_sha256"], "samples": spec.samples,
+            "spec_sha256": meta["spec_sha256"], "samples": spec.samples, "files": entries(out),
         })
     return run
 

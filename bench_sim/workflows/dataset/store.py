@@ -23,12 +23,14 @@ import numpy as np
 from bench_sim.config import config_sha256, config_to_toml_text
 from bench_sim.errors import BenchSimError
 from bench_sim.io import atomic_path, check_output_dir, umask, write_csv, write_json
+from bench_sim.io.ownership import entries, refuse_foreign, remove_listed
 from bench_sim.runtime.provenance import provenance
 from bench_sim.version import __version__
 from bench_sim.workflows.dataset.coordinates import constant_attrs, physical_coords, variable_attrs
 from bench_sim.workflows.dataset.reader import (
     COMPLETION_RECORD,
     DATA_STORE,
+    DATASET_FILES,
     DATASET_JSON,
     DATASET_KIND,
     FUSED_VARIABLES,
@@ -214,7 +216,8 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
 
 def lay_out(spec: DatasetSpec, out: Path) -> None:
     """Make the skeleton in a temporary folder beside ``out`` and rename it into place (replacing
-    an empty folder or a dataset that may be replaced)."""
+    an empty folder or a dataset that may be replaced: of that, only the dataset's own entries,
+    checked by :func:`check_folder`, are removed)."""
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
     try:
@@ -222,10 +225,14 @@ def lay_out(spec: DatasetSpec, out: Path) -> None:
         os.chmod(tmp, 0o777 & ~umask())
         old = None
         if out.exists():
+            refuse_foreign(out, "--out", DATASET_FILES)  # once more, just before it goes
+            owned = entries(out)
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
             os.replace(out, old / "set")
         os.replace(tmp, out)
         if old is not None:
+            if remove_listed(old / "set", owned):  # pragma: no cover - an entry added meanwhile
+                os.replace(old / "set", out.with_name(f"{out.name}.kept-{os.getpid()}"))
             shutil.rmtree(old, ignore_errors=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -240,12 +247,13 @@ def check_folder(spec: DatasetSpec, out: Path, *, reuse: bool) -> str:
         raise BenchSimError(f"--out = {str(out)!r}: is a file, not a folder")
     if state == "other":
         raise BenchSimError(
-            f"--out = {str(out)!r}: folder exists, is not empty and holds no bench_sim dataset: choose "
-            "a new or empty folder"
+            f"--out = {str(out)!r}: folder exists, is not empty and holds no bench_sim dataset (no "
+            f"{DATASET_JSON} of ours): choose a new or empty folder"
         )
     if state in ("absent", "empty"):
         check_output_dir(out)
         return "create"
+    refuse_foreign(out, "--out", DATASET_FILES)  # only a dataset's own entries are ever touched
     info = json.loads((out / DATASET_JSON).read_text())
     records = read_records(out)
     has_data = (out / DATA_STORE).is_dir()

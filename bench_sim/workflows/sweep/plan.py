@@ -21,6 +21,7 @@ from typing import Any
 from bench_sim.config import BenchConfig, config_sha256
 from bench_sim.errors import BenchSimError
 from bench_sim.io import OUTPUT_MARKER, check_output_dir, sha256_text
+from bench_sim.io.ownership import refuse_foreign
 from bench_sim.render.engines import check_fast_engine_valid
 from bench_sim.runtime.journal import Journal
 from bench_sim.workflows.simulate import check_inputs
@@ -35,6 +36,7 @@ __all__ = [
     "IMAGES",
     "BANDING_DOC",
     "JOURNAL",
+    "SWEEP_FILES",
     "PointTask",
     "SweepPlan",
     "banding_column",
@@ -135,6 +137,12 @@ BANDING_DOC = ("1", SCENE, "flicker banding along the track: amplitude at the li
                "(bench_sim.metrics.banding.flat_banding; NaN on a target without flat areas)")
 #: The journal's folder in ``DIR``: one ``NNNNNN.json`` record per finished point
 JOURNAL = "points"
+#: Everything a sweep folder may hold (patterns of :mod:`bench_sim.io.ownership`): a folder
+#: holding anything else is not a sweep's, and ``--resume`` refuses it
+SWEEP_FILES = (
+    "sweep.json", "points.csv", "points.csv.json", "points_images.csv", "sweep.nc", "report.md",
+    "plots/*.png", f"{JOURNAL}/[0-9]*.json", f"{IMAGES_DIR}/point_*.zarr/**",
+)
 
 
 def banding_column(light: str, stage: int) -> str:
@@ -221,42 +229,49 @@ def _check_points(spec: SweepSpec) -> None:
 
 
 def _sweep_meta(out: Path) -> dict[str, Any] | None:
-    """``sweep.json`` of a sweep folder; ``None`` (one warning) if it is empty or unreadable
-    (a crash while it was written): the records, which carry their spec's hash, decide then."""
+    """``sweep.json`` of a sweep folder; ``None`` (one warning) if it is missing, empty or
+    unreadable (a crash while it was written, a lost file): the records, which carry their
+    spec's hash and seed, decide then, and it is rebuilt from them."""
     try:
         meta = json.loads((out / "sweep.json").read_text())
         if isinstance(meta, dict):
             return meta
     except (OSError, ValueError):
         pass
-    warnings.warn(f"bench_sim: {out / 'sweep.json'}: empty or unreadable: rewritten; the point records "
-                  "are checked one by one", RuntimeWarning, stacklevel=3)
+    warnings.warn(f"bench_sim: {out / 'sweep.json'}: missing, empty or unreadable: rebuilt from the point "
+                  "records, which are checked one by one", RuntimeWarning, stacklevel=3)
     return None
 
 
 def own_points(out: Path, sha: str, seed: int) -> dict[int, dict[str, Any]]:
-    """The finished (``ok``) point records of ``out`` that belong to this sweep: same spec hash
-    and seed in the record. Others (another spec's or seed's, a record without them) are
-    recomputed, with one warning line counting them."""
-    own, foreign = {}, 0
+    """The finished (``ok``) point records of ``out``, every one of which must belong to this
+    sweep (same spec hash and seed): a record of another spec or seed is never overwritten, so
+    ``--resume`` is refused (one line naming it). An unreadable record is not a record: its
+    point runs again (:mod:`bench_sim.runtime.journal`)."""
+    own = {}
     for i, rec in read_points(out).items():
         if rec.get("spec_sha256") != sha or rec.get("seed") != seed:
-            foreign += 1
-        elif rec.get("status") == "ok":
+            raise BenchSimError(
+                f"--out = {str(out)!r}: {JOURNAL}/{i:06d}.json is a point record of another spec or seed; "
+                "--resume never overwrites a record: use the spec and seed that made it, or a new folder"
+            )
+        if rec.get("status") == "ok":
             own[i] = rec
-    if foreign:
-        warnings.warn(f"bench_sim: {out / JOURNAL}: {foreign} point records of another spec or seed: "
-                      "recomputed", RuntimeWarning, stacklevel=3)
     return own
 
 
 def _done_points(out: Path, sha: str, seed: int, resume: bool) -> dict[int, dict[str, Any]]:
-    """The points already finished in ``out`` (``--resume``), after checking the folder."""
+    """The points already finished in ``out`` (``--resume``), after checking the folder: with
+    ``--resume`` every entry of it must be a sweep's (:data:`SWEEP_FILES`), its ``sweep.json``
+    of this spec, or, where that is lost, its records of this spec (then rebuilt from them)."""
     if resume and out.is_dir() and any(out.iterdir()):
-        meta_path = out / "sweep.json"
-        if not meta_path.is_file() and not (out / JOURNAL).is_dir():
-            raise BenchSimError(f"--out = {str(out)!r}: --resume needs a sweep folder (no sweep.json there)")
-        old = _sweep_meta(out) if meta_path.is_file() else None
+        refuse_foreign(out, "--out", SWEEP_FILES)
+        if not (out / "sweep.json").exists() and not read_points(out):
+            raise BenchSimError(
+                f"--out = {str(out)!r}: --resume needs a sweep folder (no sweep.json and no point record "
+                "there)"
+            )
+        old = _sweep_meta(out)
         if old is not None and old.get("spec_sha256") != sha:
             raise BenchSimError(
                 f"--out = {str(out)!r}: holds a sweep of another spec or base config "

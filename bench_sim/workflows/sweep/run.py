@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -51,6 +50,7 @@ from bench_sim.config import BenchConfig, config_sha256
 from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import OUTPUT_MARKER, write_json
 from bench_sim.io.folder_lock import folder_lock
+from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.runtime.provenance import provenance
@@ -173,22 +173,27 @@ def _preflight(plan: SweepPlan, workers: int | None, scheduler: str | None, plot
 def _open_folder(
     plan: SweepPlan, workers: int | None, scheduler: str | None
 ) -> tuple[list[dict[str, Any]], dict[int, dict[str, Any]]]:
-    """Make ``DIR`` ready (kept on ``--resume``, else replaced), mark it unfinished and write
+    """Make ``DIR`` ready (kept on ``--resume``, else the files of the finished set it holds
+    removed, nothing else), mark it unfinished and write
     ``sweep.json`` (status ``running``). Returns the sessions and the records already there."""
     out = plan.out
     old_sessions: list[dict[str, Any]] = []
-    if plan.resume and (out / "sweep.json").is_file():
-        with contextlib.suppress(OSError, ValueError, AttributeError):  # unreadable: checked by the plan
+    if plan.resume:  # nothing removed: the plan checked that every entry is this sweep's
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # lost or unreadable: rebuilt
             old_sessions = list(json.loads((out / "sweep.json").read_text()).get("sessions", []))
     elif out.exists() and any(out.iterdir()):
-        shutil.rmtree(out)  # a finished bench_sim output set (checked): replaced by this run
+        # a finished bench_sim output set (checked by the plan): only the files its record lists go
+        left = remove_listed(out, listed_files(out) or [])
+        if left:
+            raise BenchSimError(f"--out = {str(out)!r}: {left[0]!r} appeared in the folder meanwhile; it is "
+                                "not bench_sim's and is kept: move it away or choose a new folder")
     out.mkdir(parents=True, exist_ok=True)
     (out / OUTPUT_MARKER).unlink(missing_ok=True)  # unfinished from here on
     session = {"resumed": bool(plan.resume), "skipped": len(plan.done), "ran": [t.index for t in plan.todo],
                "workers": workers if scheduler is None else None, "scheduler": scheduler is not None}
     sessions = [*old_sessions, session]
     write_json(out / "sweep.json", _meta(plan, "running", sessions, {}))
-    # only this sweep's finished points (plan.done): a failed or foreign record is recomputed
+    # only this sweep's finished points (plan.done): a failed record is recomputed
     return sessions, dict(plan.done)
 
 
@@ -255,7 +260,8 @@ def _run_and_write(
     write_outputs(plan.out, plan, records, sessions, plots=plots)
     write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
                                               "complete_with_failures", sessions, totals))
-    write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals})
+    write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals,
+                                          "files": entries(plan.out)})
     return records
 
 
