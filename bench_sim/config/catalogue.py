@@ -13,7 +13,7 @@ from __future__ import annotations
 import re
 import types
 import typing
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -23,9 +23,9 @@ from pydantic_core import PydanticUndefined
 
 from bench_sim.config.bench import BenchConfig
 from bench_sim.config.lighting import LightConfig
-from bench_sim.config.plausible import typical_for
+from bench_sim.config.plausible import Typical, typical_for
 
-__all__ = ["KeyInfo", "UNIT_SUFFIXES", "unit_of", "config_keys", "config_sections"]
+__all__ = ["KeyInfo", "UNIT_SUFFIXES", "unit_of", "config_keys", "config_sections", "model_keys"]
 
 #: Units carried by key names (longest suffix first).
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (
@@ -129,23 +129,34 @@ def _model_of(ann: Any) -> type[BaseModel] | None:
     return None
 
 
-def _walk(model: type[BaseModel], prefix: str) -> Iterator[KeyInfo]:
+def model_keys(
+    model: type[BaseModel], prefix: str, typical: Callable[[str], Typical | None] | None = None
+) -> Iterator[KeyInfo]:
+    """The keys of ``model`` (and of the tables it nests) as :class:`KeyInfo`, each named
+    ``prefix + name``; ``typical`` gives a key's typical range (default: the config's,
+    :func:`bench_sim.config.plausible.typical_for`)."""
+    return _walk(model, prefix, typical)
+
+
+def _walk(
+    model: type[BaseModel], prefix: str, typical: Callable[[str], Typical | None] | None = None
+) -> Iterator[KeyInfo]:
     for name, field in model.model_fields.items():
         key = f"{prefix}{name}"
         sub = _model_of(field.annotation)
         if sub is not None:
-            yield from _walk(sub, key + ".")
+            yield from _walk(sub, key + ".", typical)
             if sub.model_config.get("extra") == "allow":  # the lights: any other name, any kind
                 for kind_model in typing.get_args(LightConfig):
                     kind = kind_model.model_fields["kind"].default
                     yield from _walk(kind_model, f"{key}.<name>[kind={kind}].")
             continue
-        typ = typical_for(re.sub(r"\[kind=\w+\]", "", key))
+        typ = (typical or typical_for)(re.sub(r"\[kind=\w+\]", "", key))
         yield KeyInfo(
             key=key,
             type=_type_name(field.annotation),
             unit=unit_of(name),
-            default=_toml(field.default),
+            default=_toml(field.get_default(call_default_factory=True)),
             allowed=_allowed(field.metadata, field.annotation),
             typical=typ.describe() if typ is not None else "",
             description=" ".join((field.description or "").split()),

@@ -228,6 +228,27 @@ def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+#: keys of a sensor effect that name a file (relative to the config that writes them)
+EFFECT_FILE_KEYS = ("table", "map_file")
+
+
+def _resolve_effect_files(data: dict[str, Any], folder: Path) -> None:
+    """The files a config's sensor effects name (a response table, a defect map, a plug-in's
+    ``file.py:function``), made absolute against ``folder`` (the config's own)."""
+    effects = data.get("sensor", {}).get("effects") if isinstance(data.get("sensor"), dict) else None
+    for entry in (effects or {}).values() if isinstance(effects, dict) else ():
+        if not isinstance(entry, dict):
+            continue
+        for key in EFFECT_FILE_KEYS:
+            if isinstance(entry.get(key), str) and entry[key] and not Path(entry[key]).is_absolute():
+                entry[key] = str((folder / entry[key]).resolve())
+        fn = entry.get("function")
+        if isinstance(fn, str) and ".py:" in fn:
+            file, _, name = fn.rpartition(":")
+            if not Path(file).is_absolute():
+                entry["function"] = f"{(folder / file).resolve()}:{name}"
+
+
 def _read_config_file(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
     """A config file's settings, merged over its ``base`` chain; ``target.image`` resolved
     against the file that names it."""
@@ -237,6 +258,7 @@ def _read_config_file(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any
     image = data.get("target", {}).get("image") if isinstance(data.get("target"), dict) else None
     if isinstance(image, str) and image and not Path(image).is_absolute():
         data["target"]["image"] = str((path.parent / image).resolve())  # relative to this file
+    _resolve_effect_files(data, path.parent)
     base = data.pop("base", None)
     if base is None:
         return data

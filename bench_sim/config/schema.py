@@ -12,6 +12,7 @@ properties of that section: the one place of each formula.
 
 from __future__ import annotations
 
+import re
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -31,6 +32,8 @@ __all__ = [
     "LensConfig",
     "TargetConfig",
     "SensorConfig",
+    "EffectEntry",
+    "EFFECT_NAME",
     "TimingConfig",
     "DTDIConfig",
     "RenderConfig",
@@ -221,6 +224,26 @@ class TargetConfig(Section):
 
 
 
+#: Names of the sensor's effects (``[sensor.effects.<name>]``): lower-case identifiers
+EFFECT_NAME = re.compile(r"[a-z][a-z0-9_]*")
+
+
+class EffectEntry(BaseModel):
+    """One effect of the sensor's chain, ``[sensor.effects.<name>]``: its ``kind`` (a built-in
+    effect, or ``"plugin"`` for a function of your own) and its parameters.
+
+    The parameters are checked by the effect itself (:mod:`bench_sim.sensor.effects`: names,
+    units, ranges, unit slips), when the chain is built, before anything runs;
+    ``bench-sim config keys sensor`` lists every kind with its keys.
+    """
+
+    model_config = ConfigDict(extra="allow", frozen=True, allow_inf_nan=False, defer_build=True)
+
+    kind: str = Field(description="the effect: a built-in kind (bench-sim config keys sensor lists them) "
+                      "or 'plugin'")
+    enabled: bool = Field(True, description="false: the effect is left out of the chain")
+
+
 class SensorConfig(Section):
     """Area CMOS sensor: geometry and EMVA 1288 (Release 4) pixel model.
 
@@ -266,6 +289,19 @@ class SensorConfig(Section):
     dsnu_enabled: bool = True
     column_fpn: bool = True
     quantization: bool = True
+    effects: dict[str, EffectEntry] = Field(
+        default_factory=dict,
+        description="further effects of the pixel chain, [sensor.effects.<name>] tables with a kind "
+        "(non-linearity, defect pixels, offset pattern, row noise, your own function): each acts at "
+        "its point of the signal path, in the order written (bench_sim.sensor.effects)",
+    )
+
+    @model_validator(mode="after")
+    def _effect_names(self) -> SensorConfig:
+        for name in self.effects:
+            if not EFFECT_NAME.fullmatch(name):
+                raise ValueError(f"sensor.effects.{name}: use a lower-case identifier (letters, digits, _)")
+        return self
 
     @model_validator(mode="after")
     def _black_below_adc_top(self) -> SensorConfig:

@@ -45,11 +45,11 @@ from bench_sim.io import check_output_dir, output_set, write_csv, write_figure_p
 from bench_sim.measure.calibration import CameraFit, fit_camera
 from bench_sim.measure.chain_dr import measure_chain_dynamic_range
 from bench_sim.measure.uniform_field import measurement_pedestal_dn
-from bench_sim.runtime.provenance import provenance
 from bench_sim.sensor.model import stage_dr_model_db, stage_saturation_photons, stage_snr1_photons
 from bench_sim.sensor.saturation import full_well_for_saturation, stage_variance_maximum_photons
 from bench_sim.workflows.calibrate_inputs import CalibrationInput, read_input
 from bench_sim.workflows.calibrate_report import figures, report_markdown, results_rows
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed
 from bench_sim.workflows.reproduce.report import AGREE_DB
 

@@ -22,8 +22,9 @@ from typing import Annotated
 import typer
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, SCENES_DIR, config_to_toml_text, load_config
-from bench_sim.config.catalogue import KeyInfo, config_keys, config_sections
+from bench_sim.config.catalogue import KeyInfo, config_keys, config_sections, model_keys
 from bench_sim.errors import BenchSimError
+from bench_sim.sensor.effects.chain import effect_kinds, sensor_chain
 
 __all__ = [
     "keys_text", "keys_markdown", "show_text", "init_folder", "INIT_IGNORED", "config_app", "init_command",
@@ -33,8 +34,22 @@ __all__ = [
 INIT_IGNORED = ("__pycache__", "*.pyc", ".*")
 
 
+def effect_keys() -> list[KeyInfo]:
+    """The keys of every sensor effect, ``sensor.effects.<name>[kind=KIND].KEY``, from each
+    effect's own parameters (:mod:`bench_sim.sensor.effects`), after its ``kind`` line."""
+    out = []
+    for kind, cls in effect_kinds().items():
+        prefix = f"sensor.effects.<name>[kind={kind}]."
+        out.append(KeyInfo(prefix + "kind", "str", "", f'"{kind}"', "", "", cls.summary))
+        out.extend(model_keys(cls.Params, prefix, lambda key, c=cls: c.TYPICAL.get(key.rsplit(".", 1)[-1])))
+    return out
+
+
 def _chosen(section: str | None) -> list[KeyInfo]:
     keys = config_keys(section)
+    head = (section or "").rstrip(".").split("<")[0]
+    if "sensor.effects".startswith(head) or head.startswith("sensor.effects"):
+        keys += [k for k in effect_keys() if k.key.startswith(head)]
     if not keys:
         names = config_sections()
         close = difflib.get_close_matches(section or "", names, n=1, cutoff=0.5)
@@ -82,6 +97,7 @@ def show_text(config: Path) -> str:
     """The config ``config`` resolved through its ``base`` chain, as TOML (with a comment naming
     the file); a bad config is the one-line error of :func:`bench_sim.config.load_config`."""
     cfg = load_config(config)
+    sensor_chain(cfg.sensor)  # its effects checked as every command checks them
     return f"# {Path(config).resolve()}, resolved (base chain applied, defaults filled in)\n" + (
         config_to_toml_text(cfg)
     )

@@ -31,6 +31,7 @@ from bench_sim.io import check_output_dir
 from bench_sim.rig.target_sources import check_target_image
 from bench_sim.runtime.backend import select_backend
 from bench_sim.runtime.resources import ResourceEstimate, check_resources, local_concurrency
+from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.workflows.estimates import estimate_simulate, estimate_tasks
 
 __all__ = ["preflight", "preflight_tasks", "check_seed", "is_seed", "SeedField", "SEED_MAX", "SEED_RULE"]
@@ -105,8 +106,9 @@ def preflight(
     Path or None
         ``out`` resolved.
     """
-    if cfg is not None:  # a config value, refused first as load_config's errors are
+    if cfg is not None:  # config values, refused first as load_config's errors are
         check_tonemap_method(cfg.fusion.tra)
+        sensor_chain(cfg.sensor)  # every effect's parameters, files and plug-ins
     out_path = check_output_dir(out, what) if out is not None else None
     if estimate is not None:
         check_resources(estimate, out_path)

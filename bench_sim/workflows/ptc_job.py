@@ -54,8 +54,8 @@ from bench_sim.measure.ptc import (
     measure_ptc,
     plan_ptc,
 )
-from bench_sim.runtime.provenance import provenance
 from bench_sim.workflows.estimates import estimate_ptc
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
 
 __all__ = ["write_ptc", "run_ptc", "SUMMARY_COLUMNS"]

@@ -30,15 +30,14 @@ from bench_sim.pipeline import (
     STAGE_DIMS,
     PassResult,
     Variable,
-    check_stages,
     pass_variables,
     run_pass,
 )
 from bench_sim.render.exposures import RenderSetup
-from bench_sim.runtime.provenance import provenance
-from bench_sim.sensor.dtdi import frames_needed
+from bench_sim.sensor.dtdi import check_stages, frames_needed
 from bench_sim.sensor.pass_lines import PassSink
 from bench_sim.workflows.estimates import estimate_simulate
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
 from bench_sim.workflows.simulate_store import ZarrPassSink
 

@@ -30,6 +30,7 @@ from bench_sim.pipeline import (
     pass_attrs,
     pass_coords,
     pass_dtypes,
+    variable_attrs,
 )
 from bench_sim.render.exposures import RenderSetup
 
@@ -69,7 +70,7 @@ def _template(
     order = [v.name for v in VARIABLES_BY_NAME.values() if v.name in data]
     ds = xr.Dataset({n: data[n] for n in order}, coords=pass_coords(cfg, st))
     for key, v in ds.data_vars.items():
-        v.attrs.update(units=VARIABLES_BY_NAME[str(key)].units, long_name=VARIABLES_BY_NAME[str(key)].doc)
+        v.attrs.update(variable_attrs(cfg, str(key)))
     for coord, attrs in COORD_ATTRS.items():
         ds[coord].attrs.update(attrs)
     ds.attrs.update(pass_attrs(cfg, seed, setup, fused=bool(image_dt)))

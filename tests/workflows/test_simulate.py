@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import bench_sim
-from bench_sim.config import config_from_dict
+from bench_sim.config import config_from_dict, config_to_toml_dict
 from bench_sim.errors import BenchSimError
 from bench_sim.pipeline import PASS_VARIABLES, stage_pixel_bytes
 from bench_sim.sensor import stage_mean_var_dn
@@ -140,7 +140,7 @@ def test_dataset_variables_units_and_provenance():
     cfg = config_from_dict(tomllib.loads(ds.attrs["config"]))
     assert cfg == config_from_dict(_overrides())
     assert ds.attrs["config_sha256"] == hashlib.sha256(
-        __import__("json").dumps(cfg.model_dump(mode="json", exclude_none=True), sort_keys=True).encode()
+        __import__("json").dumps(config_to_toml_dict(cfg), sort_keys=True).encode()
     ).hexdigest()
     assert (ds.attrs["seed"], ds.attrs["version"]) == (5, bench_sim.__version__)
     assert ds.attrs["engine"] == "fast" and ds.attrs["variant"]
@@ -159,7 +159,7 @@ def test_dataset_variables_units_and_provenance():
     assert stage_pixel_bytes(12, truth=False) == ds.dn.dtype.itemsize == 2
     per_pixel = sum(ds[v].dtype.itemsize for v in ds.data_vars if "stage" in ds[v].dims)
     assert stage_pixel_bytes(12, truth=True) == per_pixel
-    assert stage_pixel_bytes(None, truth=True) == 4 + 8 + 8 + 8 + 4 + 1  # dn, mean_dn, linear_dn, ...
+    assert stage_pixel_bytes(None, truth=True) == 4 + 8 + 8 + 8 + 8 + 4 + 1  # dn, mean_dn, linear_dn, ...
 
 
 def test_same_seed_same_data_and_no_hdr_without_both_stages():

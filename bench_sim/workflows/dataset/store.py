@@ -24,7 +24,6 @@ from bench_sim.config import config_sha256, config_to_toml_text
 from bench_sim.errors import BenchSimError
 from bench_sim.io import atomic_path, check_output_dir, umask, write_csv, write_json
 from bench_sim.io.ownership import entries, refuse_foreign, remove_listed
-from bench_sim.runtime.provenance import provenance
 from bench_sim.version import __version__
 from bench_sim.workflows.dataset.coordinates import constant_attrs, physical_coords, variable_attrs
 from bench_sim.workflows.dataset.reader import (
@@ -43,6 +42,7 @@ from bench_sim.workflows.dataset.reader import (
 )
 from bench_sim.workflows.dataset.splits import split_indices, split_of
 from bench_sim.workflows.dataset.targets import strict_json
+from bench_sim.workflows.output_meta import provenance
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -7,10 +7,6 @@
   fusion network is trained towards: ``E[gamma_hdr]`` wherever the stage-``mu1`` signal is more
   than a few noise standard deviations from the eq. 11 threshold (elsewhere the noisy decision
   itself is random and ``E[gamma_hdr]`` mixes both branches).
-- :func:`noise_std_dn` -> ``noise_std_dn``: the temporal standard deviation of each stage word
-  [DN], closed form of the EMVA 1288 model (:func:`bench_sim.sensor.model.stage_mean_var_dn`:
-  ``m`` independent reads of shot, dark and quantisation noise) at the pixel's mean photons;
-  valid in the linear range (``clipped`` marks where a read or the word clipped).
 - :func:`fixed_camera` -> one physical sensor (fixed patterns) for every sample of a dataset
   with ``camera = "fixed"``, drawn from its own stream of the dataset's root seed.
 """
@@ -27,7 +23,7 @@ from bench_sim.errors import BenchSimError
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.io.strict_json import strict_json
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern
-from bench_sim.sensor.model import stage_mean_var_dn, word_clip_dn
+from bench_sim.sensor.model import word_clip_dn
 
 __all__ = [
     "CAMERA_SPAWN_KEY",
@@ -35,7 +31,6 @@ __all__ = [
     "EXTRA_STAGE_VARIABLES",
     "EXTRA_FUSED_VARIABLES",
     "expected_gamma_hdr",
-    "noise_std_dn",
     "fixed_camera",
     "strict_json",
     "check_camera",
@@ -52,11 +47,9 @@ CAMERAS: dict[str, str] = {
 #: never coincides with a sample's stream ``SeedSequence(seed, spawn_key=(i,))``.
 CAMERA_SPAWN_KEY = 2**32
 
-#: Dataset-only variables (name -> dtype, units, long name) beside the pass's variables
-EXTRA_STAGE_VARIABLES: dict[str, tuple[str, str, str]] = {
-    "noise_std_dn": ("float32", "DN", "temporal standard deviation of the stage word (EMVA 1288 model at "
-                     "the pixel's mean photons; linear range)"),
-}
+#: Dataset-only variables (name -> dtype, units, long name) beside the pass's variables (none per
+#: stage: ``noise_std_dn`` is the pass's own truth)
+EXTRA_STAGE_VARIABLES: dict[str, tuple[str, str, str]] = {}
 EXTRA_FUSED_VARIABLES: dict[str, tuple[str, str, str]] = {
     "gamma_hdr_truth": ("float32", "DN", "noise-free Gamma_HDR: eq. 11 of the expected stage words "
                         "(mean_dn of mu1, mu2 clipped to the word), stage-mu2 units, pedestal removed"),
@@ -95,33 +88,6 @@ def expected_gamma_hdr(
     return np.asarray(fused.hdr, dtype=np.float32)
 
 
-def noise_std_dn(
-    photons: np.ndarray, cfg: BenchConfig, t_int_s: float, stages: tuple[int, ...]
-) -> np.ndarray:
-    """Temporal standard deviation of each stage word [DN] (float32, shape of ``photons``).
-
-    ``sigma_m = sqrt(m (K^2 (sigma_d^2 + eta mu_p) + sigma_q^2))`` with ``mu_p`` the pixel's mean
-    photons per read (``photons / m``; :func:`bench_sim.sensor.model.stage_mean_var_dn`, EMVA
-    1288 R4 eq. 7 per read, ``m`` independent reads).
-
-    Parameters
-    ----------
-    photons
-        ``(stage, line, column)`` mean photons of each stage pixel (sum over its ``m`` rows).
-    cfg
-        The sample's bench (sensor model).
-    t_int_s
-        Integration time of one read [s].
-    stages
-        The stages along the first axis.
-    """
-    out = np.empty(np.shape(photons), dtype=np.float32)
-    for s, m in enumerate(stages):
-        _, var = stage_mean_var_dn(np.asarray(photons[s], dtype=np.float64) / m, cfg.sensor, t_int_s, m)
-        out[s] = np.sqrt(var)
-    return out
-
-
 def fixed_camera(cfg: BenchConfig, seed: int) -> FixedPattern:
     """The one physical sensor of a ``camera = "fixed"`` dataset of root seed ``seed``: its
     fixed patterns drawn from ``SeedSequence(seed, spawn_key=(CAMERA_SPAWN_KEY,))`` for the
@@ -131,10 +97,9 @@ def fixed_camera(cfg: BenchConfig, seed: int) -> FixedPattern:
 
 
 def training_targets(ds: Any, cfg: BenchConfig) -> dict[str, np.ndarray]:
-    """``noise_std_dn`` (every stage) and, when the pass fused two stages, ``gamma_hdr_truth``
-    of a pass's dataset (:func:`bench_sim.pipeline.run_pass` with its truth)."""
-    stages = tuple(int(m) for m in ds.stage.values)
-    out = {"noise_std_dn": noise_std_dn(ds.photons.values, cfg, float(ds.attrs["t_int_s"]), stages)}
+    """``gamma_hdr_truth``, when the pass fused two stages, of a pass's dataset
+    (:func:`bench_sim.pipeline.run_pass` with its truth)."""
+    out: dict[str, np.ndarray] = {}
     if "gamma_hdr" in ds:
         mu1, mu2 = int(ds.attrs["mu1"]), int(ds.attrs["mu2"])
         out["gamma_hdr_truth"] = expected_gamma_hdr(

@@ -52,7 +52,7 @@ from bench_sim.rig.geometry import rig_geometry
 from bench_sim.rig.target import make_panel
 from bench_sim.runtime.parallel import Lane
 from bench_sim.runtime.progress import progress_bar
-from bench_sim.runtime.provenance import provenance, render_provenance
+from bench_sim.runtime.provenance import render_provenance
 from bench_sim.sensor.model import (
     QUANTIZATION_VAR_DN2,
     dark_noise_e,
@@ -61,6 +61,7 @@ from bench_sim.sensor.model import (
     stage_snr1_photons,
 )
 from bench_sim.workflows.estimates import estimate_reproduce
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
 from bench_sim.workflows.reproduce import writing
 from bench_sim.workflows.reproduce.figures import Box

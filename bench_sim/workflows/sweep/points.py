@@ -30,8 +30,8 @@ import numpy as np
 from bench_sim.config import config_to_toml_text
 from bench_sim.io import write_csv, write_json
 from bench_sim.io.strict_json import strict_json
-from bench_sim.runtime.provenance import provenance
 from bench_sim.version import __version__
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.sweep.plan import SweepPlan, column_docs
 
 __all__ = [

@@ -53,7 +53,7 @@ from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
-from bench_sim.runtime.provenance import provenance
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import preflight_tasks
 from bench_sim.workflows.sweep.plan import (
     CAMERA,

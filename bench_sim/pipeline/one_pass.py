@@ -1,40 +1,5 @@
-"""One pass: frames -> sensor -> DTDI -> stage images and their truth.
-
-:func:`run_pass` renders the frames ``0 .. L + max(stages) - 2`` (``L = config.lines``), exposes
-the rows ``0 .. max(stages) - 1`` of the sensor (EMVA 1288 model, :mod:`bench_sim.sensor.emva`)
-through the one sensor + DTDI loop (:func:`bench_sim.sensor.stream.iter_stream`), accumulates
-every requested stage (paper eq. 1-2, 4) and, from the same frames and the same physical sensor,
-the truth (:mod:`bench_sim.sensor.stage_truth`). Its dataset (:class:`xarray.Dataset`,
-dimensions ``stage``, ``line``, ``column``) holds the variables of :data:`PASS_VARIABLES`:
-
-=============== ======================================================================
-``dn``          stage words (``0 .. 2**beta - 1``; uint16 up to beta = 16, else uint32)
-``mean_dn``     exact expectation of ``dn``: full-well, ADC and word clips included
-                (:mod:`bench_sim.sensor.expectation`; fixed patterns in)
-``linear_dn``   the linear model's expectation, no clip (what ``mean_dn`` was before)
-``photons``     mean photons collected by the stage pixel (its ``m`` rows, smear in)
-``reflectance`` target reflectance integrated by the pixel's ``m`` footprints
-``clipped``     a read hit full well or the ADC top, or the word hit ``2**beta - 1``
-``gamma_hdr``   eq. 11 fusion of stages ``fusion.mu1``, ``fusion.mu2`` (when both requested)
-``gamma_hdr_source``  the stage each ``gamma_hdr`` pixel came from
-``gamma_hdr_error``   with the truth: ``(gamma_hdr - E) / E``, ``E`` = ``linear_dn`` of ``mu2``
-                less the pedestal (its exact expectation where nothing clips; nan below 1 DN)
-``tdi_light_ratio``   with the truth: ``r = (photons_mu2 / mu2) / (photons_mu1 / mu1)``, the TDI
-                window's light ratio (eq. 11 assumes ``r = 1``; :mod:`bench_sim.metrics.fusion_truth`)
-=============== ======================================================================
-
-Attributes carry the resolved config as TOML text, its SHA-256, the seed, the version, the
-engine and the Mitsuba variant. Random numbers come from one generator, drawn in a fixed order
-(render seed, fixed pattern, then the seed of the temporal noise, from which every chunk of
-frames spawns its own stream), so the same config and seed give identical data with any number
-of threads. Rendering runs a chunk ahead in its own thread and the chunks of frames are exposed
-on the thread pool (:mod:`bench_sim.runtime.parallel`) while the stages accumulate in order.
-
-:data:`PASS_VARIABLES` is the one table of the pass's variables: the arrays the pass allocates,
-the dataset's variables and units, the data set's stored dtypes
-(:mod:`bench_sim.workflows.dataset.reader`) and the resource estimates
-(:func:`stage_pixel_bytes`) all follow it.
-"""
+"""One pass: frames -> sensor -> DTDI -> stage images and their truth (:func:`run_pass`; the
+package docstring of :mod:`bench_sim.pipeline` describes it)."""
 
 from __future__ import annotations
 
@@ -46,31 +11,38 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bench_sim.config import BETA_BITS_MAX, BenchConfig, config_sha256, config_to_toml_text
+from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
 from bench_sim.metrics.fusion_truth import relative_error, tdi_light_ratio
+from bench_sim.pipeline.variables import (
+    COORD_ATTRS,
+    IMAGE_DIMS,
+    PASS_VARIABLES,
+    pass_attrs,
+    pass_coords,
+    pass_dtypes,
+    pass_variables,
+    pedestal_dn,
+    variable_attrs,
+)
 from bench_sim.render.exposures import RenderSetup, iter_photon_frames, prepare
 from bench_sim.render.frame_kernel import TAP_LOOP
 from bench_sim.runtime.jit import Loop, warm_up
 from bench_sim.runtime.parallel import prefetch, seed_sequence
 from bench_sim.sensor import cumulant_kernel, diagonal_sums, exposure_kernel
 from bench_sim.sensor.dtdi import check_stage_subset, check_stages, frames_needed, full_scale_dn
+from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.sensor.emva import FixedPattern, draw_fixed_pattern
-from bench_sim.sensor.model import word_dtype
 from bench_sim.sensor.pass_lines import ArraySink, LineAssembler, PassSink
 from bench_sim.sensor.pass_truth import PassTruth
 from bench_sim.sensor.stream import DEFAULT_CHUNK_FRAMES, iter_stream
-from bench_sim.version import __version__
 
 if TYPE_CHECKING:
     import xarray as xr
 
 __all__ = [
-    "run_pass", "PassResult", "Variable", "PASS_VARIABLES", "VARIABLES_BY_NAME", "STAGE_DIMS",
-    "IMAGE_DIMS", "WORD", "pass_variables", "stage_pixel_bytes", "SENSOR_CHUNK_FRAMES",
-    "RENDER_CHUNK_FRAMES", "TRUTH_BAND_LINES", "pass_dtypes", "pass_coords", "pass_attrs", "COORD_ATTRS",
-    "pass_loops",
+    "run_pass", "PassResult", "SENSOR_CHUNK_FRAMES", "RENDER_CHUNK_FRAMES", "TRUTH_BAND_LINES", "pass_loops",
 ]
 
 #: Frames exposed per vectorised sensor call (the temporal noise depends on it: fixed).
@@ -80,100 +52,6 @@ RENDER_CHUNK_FRAMES = 64
 #: Output lines per band of the reflectance truth (the lines a streamed pass holds besides the
 #: ``max(stages)`` in progress; the values do not depend on it).
 TRUTH_BAND_LINES = 64
-
-# --- the pass's variables ------------------------------------------------------------------------
-
-#: dimensions of a variable per stage, and of a fused image
-STAGE_DIMS = ("stage", "line", "column")
-IMAGE_DIMS = ("line", "column")
-#: dtype of the stage word: :func:`bench_sim.sensor.model.word_dtype` of ``dtdi.beta_bits`` in a
-#: pass, the widest word (``beta = 32``) where stored for any ``beta`` (a data set)
-WORD = "word"
-
-
-@dataclass(frozen=True)
-class Variable:
-    """One variable of a pass.
-
-    Attributes
-    ----------
-    name
-        Variable name in the dataset and the files.
-    dims
-        :data:`STAGE_DIMS` or :data:`IMAGE_DIMS`.
-    dtype
-        numpy dtype name, or :data:`WORD` (the stage word, its width set by ``beta``).
-    units
-        Units (``"1"``: dimensionless).
-    doc
-        Long name (the dataset's ``long_name`` attribute).
-    truth
-        Computed only with the truth (``run_pass(..., truth=True)``).
-    map
-        A map of ``simulate`` derived from the truth and the fused image (not a data set's
-        variable: :func:`pass_variables` lists it only when asked).
-    """
-
-    name: str
-    dims: tuple[str, ...]
-    dtype: str
-    units: str
-    doc: str
-    truth: bool = False
-    map: bool = False
-
-    def array_dtype(self, beta_bits: int) -> np.dtype:
-        """The dtype of the array in a pass of ``beta_bits``-bit words."""
-        return word_dtype(beta_bits) if self.dtype == WORD else np.dtype(self.dtype)
-
-    @property
-    def stored_dtype(self) -> str:
-        """The dtype name that holds the variable for any ``beta`` (a data set's arrays)."""
-        return self.array_dtype(BETA_BITS_MAX).name
-
-
-#: The one table of the pass's variables, in dataset order.
-PASS_VARIABLES: tuple[Variable, ...] = (
-    Variable("dn", STAGE_DIMS, WORD, "DN", "DTDI stage word (paper eq. 1-2, 4)"),
-    Variable("mean_dn", STAGE_DIMS, "float64", "DN",
-             "exact expectation of the stage word (full-well, ADC and word clips included)", truth=True),
-    Variable("linear_dn", STAGE_DIMS, "float64", "DN",
-             "expectation of the stage word in the linear model, before any clip", truth=True),
-    Variable("photons", STAGE_DIMS, "float64", "photons",
-             "mean photons collected by the stage pixel (sum over its m rows)", truth=True),
-    Variable("reflectance", STAGE_DIMS, "float32", "1",
-             "target reflectance integrated by the stage pixel's footprints", truth=True),
-    Variable("clipped", STAGE_DIMS, "bool", "1",
-             "a read hit full well or the ADC top, or the word hit 2**beta - 1", truth=True),
-    Variable("gamma_hdr", IMAGE_DIMS, "float32", "DN",
-             "Gamma_HDR, paper eq. 11, in stage-mu2 units, pedestal removed"),
-    Variable("gamma_hdr_source", IMAGE_DIMS, "int16", "1", "stage each Gamma_HDR pixel came from"),
-    Variable("gamma_hdr_error", IMAGE_DIMS, "float32", "1",
-             "relative error of Gamma_HDR against its exact expectation (linear_dn of stage mu2 less "
-             "the pedestal; nan below 1 DN)", truth=True, map=True),
-    Variable("tdi_light_ratio", IMAGE_DIMS, "float32", "1",
-             "TDI-window light ratio r = (photons_mu2 / mu2) / (photons_mu1 / mu1); eq. 11 assumes 1",
-             truth=True, map=True),
-)
-#: name -> its :class:`Variable` of :data:`PASS_VARIABLES`
-VARIABLES_BY_NAME: dict[str, Variable] = {v.name: v for v in PASS_VARIABLES}
-
-
-def pass_variables(
-    dims: tuple[str, ...] | None = None, *, truth: bool = True, maps: bool = False
-) -> tuple[Variable, ...]:
-    """The variables of :data:`PASS_VARIABLES` with dimensions ``dims`` (default: all), without
-    the truth when ``truth`` is false, with ``simulate``'s maps (``gamma_hdr_error``,
-    ``tdi_light_ratio``) only when ``maps``."""
-    return tuple(v for v in PASS_VARIABLES if (dims is None or v.dims == dims) and (truth or not v.truth)
-                 and (maps or not v.map))
-
-
-def stage_pixel_bytes(beta_bits: int | None, *, truth: bool) -> int:
-    """Bytes per stage pixel of the stage variables [bytes]: in a pass of ``beta_bits``-bit
-    words, or as stored for any ``beta`` (``None``)."""
-    beta = BETA_BITS_MAX if beta_bits is None else beta_bits
-    return sum(v.array_dtype(beta).itemsize for v in pass_variables(STAGE_DIMS, truth=truth))
 
 
 @dataclass
@@ -215,10 +93,6 @@ class PassResult:
         return self.make_dataset()
 
 
-def _pedestal_dn(cfg: BenchConfig) -> float:
-    return float(getattr(cfg.dtdi, "pedestal_dn", 0.0))
-
-
 # --- the steps of a pass -------------------------------------------------------------------------
 
 
@@ -258,7 +132,7 @@ def _stream(
     t_pass = time.perf_counter()
     chunks = iter_stream(
         _rendered(setup, st[-1], timings), cfg.sensor, cfg.dtdi, setup.geom.t_int_s, st, fp, noise,
-        pedestal_dn=_pedestal_dn(cfg), chunk_frames=SENSOR_CHUNK_FRAMES, saturated=truth is not None,
+        pedestal_dn=pedestal_dn(cfg), chunk_frames=SENSOR_CHUNK_FRAMES, saturated=truth is not None,
     )
     for got in chunks:
         t0 = time.perf_counter()
@@ -286,7 +160,7 @@ def _fused(cfg: BenchConfig, lines: dict[int, dict[str, np.ndarray]]) -> dict[st
     the pedestal the fusion removed) and ``tdi_light_ratio``
     (:func:`bench_sim.metrics.fusion_truth.tdi_light_ratio` of their ``photons``)."""
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    ped = _pedestal_dn(cfg)
+    ped = pedestal_dn(cfg)
     kw = {"pedestal_dn": ped} if ped else {}
     beta = cfg.dtdi.beta_bits
     fused = fuse_dtdi_hdr_eq11(lines[mu1]["dn"], lines[mu2]["dn"], mu1=mu1, mu2=mu2, beta=beta, **kw)
@@ -301,20 +175,6 @@ def _fused(cfg: BenchConfig, lines: dict[int, dict[str, np.ndarray]]) -> dict[st
         out["gamma_hdr_error"] = err.astype(dtypes["gamma_hdr_error"])
         out["tdi_light_ratio"] = ratio.astype(dtypes["tdi_light_ratio"])
     return out
-
-
-def pass_dtypes(
-    cfg: BenchConfig, st: tuple[int, ...], *, truth: bool, truth_stages: tuple[int, ...] | None = None
-) -> tuple[dict[str, np.dtype], dict[str, np.dtype]]:
-    """The dtypes of a pass's stage variables and of its image variables (``gamma_hdr`` and
-    ``gamma_hdr_source`` when both fusion stages are in ``st``; the maps of the truth when
-    both have it: in ``truth_stages``, default ``st``), from :data:`PASS_VARIABLES`."""
-    beta = cfg.dtdi.beta_bits
-    stage = {v.name: v.array_dtype(beta) for v in pass_variables(STAGE_DIMS, truth=truth)}
-    both = {cfg.fusion.mu1, cfg.fusion.mu2}
-    maps = truth and both <= set(st if truth_stages is None else truth_stages)
-    image = {v.name: v.array_dtype(beta) for v in pass_variables(IMAGE_DIMS, truth=maps, maps=True)}
-    return stage, (image if both <= set(st) else {})
 
 
 def _make_dataset(
@@ -336,52 +196,11 @@ def _make_dataset(
     data: dict[str, Any] = {v.name: (v.dims, arrays[v.name]) for v in PASS_VARIABLES if v.name in arrays}
     ds = xr.Dataset(data, coords=pass_coords(cfg, st))
     for name, var in ds.data_vars.items():
-        var.attrs.update(units=VARIABLES_BY_NAME[str(name)].units, long_name=VARIABLES_BY_NAME[str(name)].doc)
+        var.attrs.update(variable_attrs(cfg, str(name)))
     for name, attrs in COORD_ATTRS.items():
         ds[name].attrs.update(attrs)
     ds.attrs.update(pass_attrs(cfg, seed, setup, fused="gamma_hdr" in arrays))
     return ds
-
-
-#: units and long names of the pass's coordinates
-COORD_ATTRS = {
-    "line": {"units": "1", "long_name": "scene line (material at line * delta along the track)"},
-    "column": {"units": "1", "long_name": "sensor column"},
-    "stage": {"units": "1", "long_name": "DTDI stage m (rows summed)"},
-}
-
-
-def pass_coords(cfg: BenchConfig, st: tuple[int, ...]) -> dict[str, np.ndarray]:
-    """The coordinates ``stage``, ``line``, ``column`` of a pass."""
-    return {"stage": np.asarray(st, dtype=np.int64), "line": np.arange(cfg.lines),
-            "column": np.arange(cfg.sensor.columns)}
-
-
-def pass_attrs(
-    cfg: BenchConfig, seed: int | np.random.SeedSequence | np.random.Generator, setup: RenderSetup, *,
-    fused: bool,
-) -> dict[str, Any]:
-    """The attributes of a pass's dataset: the resolved config as TOML text and its SHA-256, the
-    seed, the version, engine, variant, ``beta_bits``, pedestal [DN], ``t_int_s`` [s], frames and,
-    when fused, ``mu1`` and ``mu2``."""
-    attrs: dict[str, Any] = dict(
-        title=f"bench_sim simulation of {cfg.name}",
-        config=config_to_toml_text(cfg),
-        config_sha256=config_sha256(cfg),
-        seed=int(seed) if isinstance(seed, int | np.integer) else -1,
-        version=__version__,
-        engine=str(setup.info["engine"]),
-        variant=str(setup.info["variant"]),
-        beta_bits=int(cfg.dtdi.beta_bits),
-        pedestal_dn=_pedestal_dn(cfg),
-        t_int_s=float(setup.geom.t_int_s),
-        frames=int(setup.frames),
-    )
-    if isinstance(seed, np.random.SeedSequence):
-        attrs.update(seed_entropy=str(seed.entropy), seed_spawn_key=str(list(seed.spawn_key)))
-    if fused:
-        attrs.update(mu1=int(cfg.fusion.mu1), mu2=int(cfg.fusion.mu2))
-    return attrs
 
 
 def run_pass(
@@ -434,6 +253,7 @@ def run_pass(
         ``gamma_hdr`` need both fusion stages among them. Not with ``sink``.
     """
     st = check_stages(stages, cfg.sensor.rows)
+    sensor_chain(cfg.sensor)  # the chain's effects checked before anything is rendered
     some = st if truth_stages is None else check_stage_subset(truth_stages, st, "truth_stages")
     tst = some if truth else None
     if sink is not None and tst not in (None, st):
@@ -450,20 +270,25 @@ def run_pass(
     noise = seed_sequence(rng)
     fp = fixed if n_rows == cfg.sensor.rows else fixed.window(n_rows, n_cols)
     lines_out, array_sink = _assembler(cfg, st, tst, truth, sink, setup)
-    stage_truth = None
-    if tst is not None:
-        t0 = time.perf_counter()
-        stage_truth = PassTruth(
-            cfg, setup, fp, tst, pedestal_dn=_pedestal_dn(cfg), band_lines=TRUTH_BAND_LINES,
-            footprint_rows=n_rows,
-        )
-        timings["truth"] += time.perf_counter() - t0
+    stage_truth = None if tst is None else _pass_truth(cfg, setup, fp, tst, n_rows, timings)
     _stream(cfg, setup, fp, noise, st, lines_out, stage_truth, timings, on_frames)
     if array_sink is None:
         return PassResult({}, setup, timings, None, truth=truth)
     dn = {m: array_sink.arrays["dn"][s] for s, m in enumerate(st)}
     make = functools.partial(_make_dataset, cfg, seed, setup, st, array_sink.arrays, tst)
     return PassResult(dn, setup, timings, make, truth=truth)
+
+
+def _pass_truth(
+    cfg: BenchConfig, setup: RenderSetup, fp: FixedPattern, tst: tuple[int, ...], n_rows: int,
+    timings: dict[str, float],
+) -> PassTruth:
+    """The truth of stages ``tst`` of the pass (its set-up timed as the truth's)."""
+    t0 = time.perf_counter()
+    out = PassTruth(cfg, setup, fp, tst, pedestal_dn=pedestal_dn(cfg), band_lines=TRUTH_BAND_LINES,
+                    footprint_rows=n_rows)
+    timings["truth"] += time.perf_counter() - t0
+    return out
 
 
 def pass_loops(cfg: BenchConfig, *, truth: bool) -> tuple[Loop, ...]:
