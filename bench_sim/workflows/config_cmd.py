@@ -13,6 +13,7 @@ dataset's image glob) still work.
 from __future__ import annotations
 
 import difflib
+import functools
 import os
 import shutil
 import tempfile
@@ -23,7 +24,9 @@ import typer
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, SCENES_DIR, config_to_toml_text, load_config
 from bench_sim.config.catalogue import KeyInfo, config_keys, config_sections, model_keys
+from bench_sim.config.plausible import Typical
 from bench_sim.errors import BenchSimError
+from bench_sim.sensor.effects.base import Effect
 from bench_sim.sensor.effects.chain import effect_kinds, sensor_chain
 
 __all__ = [
@@ -34,6 +37,11 @@ __all__ = [
 INIT_IGNORED = ("__pycache__", "*.pyc", ".*")
 
 
+def _typical_of(cls: type[Effect], key: str) -> Typical | None:
+    """The typical range of an effect's key (its ``TYPICAL``, by the key's last part)."""
+    return cls.TYPICAL.get(key.rsplit(".", 1)[-1])
+
+
 def effect_keys() -> list[KeyInfo]:
     """The keys of every sensor effect, ``sensor.effects.<name>[kind=KIND].KEY``, from each
     effect's own parameters (:mod:`bench_sim.sensor.effects`), after its ``kind`` line."""
@@ -41,7 +49,7 @@ def effect_keys() -> list[KeyInfo]:
     for kind, cls in effect_kinds().items():
         prefix = f"sensor.effects.<name>[kind={kind}]."
         out.append(KeyInfo(prefix + "kind", "str", "", f'"{kind}"', "", "", cls.summary))
-        out.extend(model_keys(cls.Params, prefix, lambda key, c=cls: c.TYPICAL.get(key.rsplit(".", 1)[-1])))
+        out.extend(model_keys(cls.Params, prefix, functools.partial(_typical_of, cls)))
     return out
 
 
