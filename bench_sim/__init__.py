@@ -14,8 +14,8 @@ The public API:
   (:func:`bench_sim.pipeline.run_pass`);
 * :func:`load_config` - a bench config from TOML (:func:`bench_sim.config.load_config`);
 * :mod:`dataset` - reading a generated data set: ``bench_sim.dataset.open(DIR)``,
-  ``bench_sim.dataset.iter_samples(DIR)``, ``iter_batches``, ``torch_dataset``
-  (:mod:`bench_sim.workflows.dataset.public`);
+  ``bench_sim.dataset.iter_samples(DIR)``, ``iter_batches``, ``torch_dataset``, ``score_fusion``
+  (the module :mod:`bench_sim.dataset`: ``from bench_sim.dataset import iter_batches`` works);
 * ``__version__`` - the installed version (:mod:`bench_sim.version`).
 
 The package itself imports nothing: each public name is resolved from its module (the table
@@ -31,11 +31,11 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from bench_sim import dataset
     from bench_sim.config import load_config
     from bench_sim.pipeline import run_pass
     from bench_sim.version import __version__
     from bench_sim.workflows.calibrate import calibrate
-    from bench_sim.workflows.dataset import public as dataset
     from bench_sim.workflows.simulate import simulate
 
 __all__ = ["__version__", "calibrate", "dataset", "load_config", "run_pass", "simulate"]
@@ -44,7 +44,7 @@ __all__ = ["__version__", "calibrate", "dataset", "load_config", "run_pass", "si
 PUBLIC: dict[str, tuple[str, str | None]] = {
     "__version__": ("bench_sim.version", "__version__"),
     "calibrate": ("bench_sim.workflows.calibrate", "calibrate"),
-    "dataset": ("bench_sim.workflows.dataset.public", None),
+    "dataset": ("bench_sim.dataset", None),
     "load_config": ("bench_sim.config", "load_config"),
     "run_pass": ("bench_sim.pipeline", "run_pass"),
     "simulate": ("bench_sim.workflows.simulate", "simulate"),

@@ -69,12 +69,18 @@ def test_own_imports_at_the_top(path: Path) -> None:
 #: the roles of a workflow package's modules (``workflows/sweep/spec.py``, ``workflows/dataset/spec.py``):
 #: the same name in each workflow package, and nowhere else
 WORKFLOW_ROLES = {"spec", "run", "report"}
+#: public modules at the top of the package that present the workflow package of the same name
+#: (``bench_sim.dataset``: ``from bench_sim.dataset import iter_batches``), and nothing else
+PUBLIC_FACADES = {"dataset.py": "workflows/dataset"}
 
 
 def test_module_names_unique() -> None:
     names: Counter[str] = Counter()
     for p in SOURCES:
         if p.name == "__main__.py" or p == PACKAGE / "__init__.py":
+            continue
+        if p.parent == PACKAGE and p.name in PUBLIC_FACADES:
+            assert (PACKAGE / PUBLIC_FACADES[p.name] / "__init__.py").is_file(), p
             continue
         name = p.parent.name if p.name == "__init__.py" else p.stem
         in_workflow_package = p.parent.parent.name == "workflows" and p.name != "__init__.py"

@@ -3,9 +3,10 @@
 A photon-transfer series (EMVA 1288): a uniform field at many levels, from dark to beyond the
 saturation of ``Gamma1``, goes through the sensor model, the streaming DTDI accumulator (the
 one uniform-field runner, :func:`bench_sim.measure.uniform_field.expose_uniform`, with its
-one pedestal rule) and the paper's fusion (:func:`bench_sim.fusion.paper.fuse_dtdi_hdr_eq11`,
-offsets removed). Per level and image the mean and the temporal variance come from an image
-pair (:func:`bench_sim.metrics.emva1288.mean_var_from_pair`), and the dynamic range
+one pedestal rule) and the paper's fusion (eq. 11 with every stage's offset removed, the
+fusion of every workflow: :func:`bench_sim.fusion.stage_pair.fuse_stage_words`). Per level and
+image the mean and the temporal variance come from an image pair
+(:func:`bench_sim.metrics.emva1288.mean_var_from_pair`), and the dynamic range
 ``20 lg(mu_p.sat / mu_p.min)`` from :func:`bench_sim.metrics.emva1288.dynamic_range_from_series`
 (``mu_p.min``: SNR = 1 on the measured SNR curve). The photon unit is mean photons per pixel per
 *frame* for all three images, so their DRs compare directly.
@@ -50,7 +51,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+from bench_sim.fusion.stage_pair import fuse_stage_words
 from bench_sim.measure.uniform_field import (
     expose_uniform,
     measurement_offsets_dn,
@@ -269,9 +270,7 @@ def _series(
         )
         g1 = st[mu1].reshape(2 * lines, columns)
         g2 = st[mu2].reshape(2 * lines, columns)
-        fused = fuse_dtdi_hdr_eq11(
-            g1, g2, mu1=mu1, mu2=mu2, beta=cfg.dtdi.beta_bits, pedestal_dn=(offsets[mu1], offsets[mu2])
-        )
+        fused = fuse_stage_words(cfg, g1, g2, mu1=mu1, mu2=mu2, pedestal_dn=pedestal)
         images = {"gamma1": g1 - offsets[mu1], "gamma2": g2 - offsets[mu2], "gamma_hdr": fused.hdr}
         return {name: mean_var_from_pair(img[:lines], img[lines:]) for name, img in images.items()}
 

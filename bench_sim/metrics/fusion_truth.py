@@ -15,7 +15,10 @@ it this module measures:
   is off by the factor ``r`` (relative error ``1/r - 1``), while ``Gamma2`` may already clip
   where ``Gamma1`` says it does not;
 - :func:`illumination_regions`: the pixels under the spot, under the fill and at the spot's edge,
-  from the truth's illumination (photons per unit reflectance) and the light ratio.
+  from the truth's illumination (photons per unit reflectance) and the light ratio;
+- :func:`clear_of_clips`: where a stage is clear of its clips (every clip, pixel, ADC or word,
+  takes less from its expectation than from a normal read :data:`CLIP_MARGIN_SIGMAS` standard
+  deviations below a clip), and :func:`clip_flags` of two fused stages.
 
 All functions are pure (arrays in, arrays or numbers out).
 
@@ -27,6 +30,7 @@ assumption ``Gamma_mu2 = (mu2/mu1) Gamma_mu1``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -39,6 +43,10 @@ __all__ = [
     "tdi_light_ratio",
     "illumination_regions",
     "LIGHT_RATIO_TOLERANCE",
+    "CLIP_MARGIN_SIGMAS",
+    "clip_shortfall",
+    "clear_of_clips",
+    "clip_flags",
 ]
 
 #: |r - 1| above which the TDI window's light counts as changing (the spot's edge)
@@ -130,3 +138,51 @@ def illumination_regions(
     spot = lit & (e > split) if peak > 1.5 * fill_level else np.zeros(p.shape, dtype=bool)
     edge = np.isfinite(r) & (np.abs(r - 1.0) > tolerance)
     return {"whole": whole, "spot": spot, "fill": lit & ~spot, "spot_edge": edge}
+
+
+#: The margin below a clip [standard deviations of the temporal noise] at which a stage counts as
+#: clear of its clips: a normal value this far below its clip is clipped in a fraction 3e-5 of its
+#: draws
+CLIP_MARGIN_SIGMAS = 4.0
+
+
+def clip_shortfall(sigmas: float = CLIP_MARGIN_SIGMAS) -> float:
+    """What one clip takes from the mean of a normal variable ``k = sigmas`` standard deviations
+    below it, in standard deviations: ``E[(X - c)+] / sigma = phi(k) - k Q(k)`` (``Q`` the
+    normal's upper tail): 7.1e-6 at ``k = 4``."""
+    k = float(sigmas)
+    return math.exp(-0.5 * k * k) / math.sqrt(2.0 * math.pi) - k * 0.5 * math.erfc(k / math.sqrt(2.0))
+
+
+def clear_of_clips(
+    linear_dn: ArrayLike, mean_dn: ArrayLike, noise_std_dn: ArrayLike, sigmas: float = CLIP_MARGIN_SIGMAS
+) -> np.ndarray:
+    """Where a stage is clear of its clips (bool), from its truth: the clips take less from its
+    expectation than one clip takes from a normal value ``sigmas`` standard deviations below it,
+    ``linear_dn - mean_dn <= clip_shortfall(sigmas) * noise_std_dn``.
+
+    ``linear_dn`` is the stage word's expectation without any clip, ``mean_dn`` with every clip
+    (the reads' full well and ADC top, the word's top), so their difference is what the clips
+    take, whichever clips; it is 0 (to rounding) where none is near. With a non-linear response
+    (a chain's ``nonlinearity``) the response's shortfall from its small-signal slope counts too.
+
+    Parameters
+    ----------
+    linear_dn, mean_dn, noise_std_dn
+        The stage's truth [DN] (:data:`bench_sim.pipeline.PASS_VARIABLES`).
+    sigmas
+        The margin [standard deviations].
+    """
+    lin = np.asarray(linear_dn, dtype=np.float64)
+    short = lin - np.asarray(mean_dn, dtype=np.float64)
+    # rounding of the two closed forms far from any clip: 1e-12 of the level
+    return short <= clip_shortfall(sigmas) * np.asarray(noise_std_dn, dtype=np.float64) + 1e-12 * np.abs(lin)
+
+
+def clip_flags(clear_mu1: ArrayLike, clear_mu2: ArrayLike) -> np.ndarray:
+    """Per pixel of a fused image (uint8): bit 0 set where stage ``mu1`` is not clear of its clips,
+    bit 1 where stage ``mu2`` is not (:func:`clear_of_clips`); 3: neither stage can give the
+    true value."""
+    c1 = np.asarray(clear_mu1, dtype=bool)
+    c2 = np.asarray(clear_mu2, dtype=bool)
+    return ((~c1).astype(np.uint8) | ((~c2).astype(np.uint8) << 1)).astype(np.uint8)

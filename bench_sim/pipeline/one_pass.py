@@ -13,19 +13,9 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
-from bench_sim.metrics.fusion_truth import relative_error, tdi_light_ratio
-from bench_sim.pipeline.variables import (
-    COORD_ATTRS,
-    IMAGE_DIMS,
-    PASS_VARIABLES,
-    pass_attrs,
-    pass_coords,
-    pass_dtypes,
-    pass_variables,
-    pedestal_dn,
-    variable_attrs,
-)
+from bench_sim.pipeline.fused_images import fused_images
+from bench_sim.pipeline.store_schema import COORD_ATTRS, pass_attrs, pass_coords
+from bench_sim.pipeline.variables import PASS_VARIABLES, pass_dtypes, pedestal_dn, variable_attrs
 from bench_sim.render.exposures import RenderSetup, iter_photon_frames, prepare
 from bench_sim.render.frame_kernel import TAP_LOOP
 from bench_sim.runtime.jit import Loop, warm_up
@@ -151,30 +141,6 @@ def _stream(
     timings["pass_wall"] = time.perf_counter() - t_pass
     if min(done.values()) < lines:
         raise BenchSimError(f"simulate: the pass gave only {min(done.values())} of {lines} lines")
-
-
-def _fused(cfg: BenchConfig, lines: dict[int, dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """``gamma_hdr`` and ``gamma_hdr_source`` (eq. 11 of stages ``fusion.mu1``, ``fusion.mu2``) of
-    the same lines of both stages (variable -> lines), and with their truth ``gamma_hdr_error``
-    (:func:`bench_sim.metrics.fusion_truth.relative_error` against ``linear_dn`` of ``mu2`` less
-    the pedestal the fusion removed) and ``tdi_light_ratio``
-    (:func:`bench_sim.metrics.fusion_truth.tdi_light_ratio` of their ``photons``)."""
-    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    ped = pedestal_dn(cfg)
-    kw = {"pedestal_dn": ped} if ped else {}
-    beta = cfg.dtdi.beta_bits
-    fused = fuse_dtdi_hdr_eq11(lines[mu1]["dn"], lines[mu2]["dn"], mu1=mu1, mu2=mu2, beta=beta, **kw)
-    dtypes = {v.name: v.array_dtype(beta) for v in pass_variables(IMAGE_DIMS, maps=True)}
-    out = {
-        "gamma_hdr": fused.hdr.astype(dtypes["gamma_hdr"]),
-        "gamma_hdr_source": fused.source.astype(dtypes["gamma_hdr_source"]),
-    }
-    if "linear_dn" in lines[mu2] and "photons" in lines[mu1]:
-        err = relative_error(fused.hdr, lines[mu2]["linear_dn"] - ped)
-        ratio = tdi_light_ratio(lines[mu1]["photons"], lines[mu2]["photons"], mu1, mu2)
-        out["gamma_hdr_error"] = err.astype(dtypes["gamma_hdr_error"])
-        out["tdi_light_ratio"] = ratio.astype(dtypes["tdi_light_ratio"])
-    return out
 
 
 def _make_dataset(
@@ -319,6 +285,6 @@ def _assembler(
     )
     out = arrays if arrays is not None else sink(setup)  # type: ignore[misc]
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    fuse = (mu1, mu2, lambda g1, g2: _fused(cfg, {mu1: g1, mu2: g2})) if image_dtypes else None
+    fuse = (mu1, mu2, lambda g1, g2: fused_images(cfg, g1, g2)) if image_dtypes else None
     top = float(full_scale_dn(cfg.dtdi.beta_bits) - 1)
     return LineAssembler(st, stage_dtypes, out, top, fuse, stages_of), arrays

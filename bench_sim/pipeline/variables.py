@@ -1,5 +1,6 @@
-"""The variables of a pass: their table (names, dimensions, dtypes, units), the dtypes a pass
-allocates, and the coordinates and attributes its dataset carries.
+"""The variables of a pass: their table (names, dimensions, dtypes, units, stored dtypes), the
+dtypes a pass allocates, and the attributes each variable carries (the coordinates and the
+dataset's attributes: :mod:`bench_sim.pipeline.store_schema`).
 
 :data:`PASS_VARIABLES` is the one table of the pass's variables: the arrays
 :func:`bench_sim.pipeline.run_pass` allocates, the dataset's variables and units, the data set's
@@ -14,16 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from bench_sim.config import BETA_BITS_MAX, BenchConfig, config_sha256, config_to_toml_text
-from bench_sim.render.exposures import RenderSetup
+from bench_sim.config import BETA_BITS_MAX, BenchConfig
 from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.sensor.model import word_dtype
-from bench_sim.version import __version__
 
 __all__ = [
     "Variable", "PASS_VARIABLES", "VARIABLES_BY_NAME", "STAGE_DIMS", "IMAGE_DIMS", "WORD", "pass_variables",
-    "stage_pixel_bytes", "pass_dtypes", "pass_coords", "pass_attrs", "COORD_ATTRS", "variable_attrs",
-    "pedestal_dn",
+    "stage_pixel_bytes", "pass_dtypes", "variable_attrs", "pedestal_dn",
 ]
 
 # --- the pass's variables ------------------------------------------------------------------------
@@ -55,8 +53,11 @@ class Variable:
     truth
         Computed only with the truth (``run_pass(..., truth=True)``).
     map
-        A map of ``simulate`` derived from the truth and the fused image (not a data set's
-        variable: :func:`pass_variables` lists it only when asked).
+        A map derived from the truth and the fused image (:func:`pass_variables` lists it only
+        when asked; ``simulate`` and the data sets store it).
+    pedestal
+        Whether the values carry the words' pedestal: ``"yes"`` (the words and their
+        expectations), ``"no"`` (removed: the fused images), ``""`` (not a level).
     """
 
     name: str
@@ -66,24 +67,31 @@ class Variable:
     doc: str
     truth: bool = False
     map: bool = False
+    pedestal: str = ""
 
     def array_dtype(self, beta_bits: int) -> np.dtype:
         """The dtype of the array in a pass of ``beta_bits``-bit words."""
         return word_dtype(beta_bits) if self.dtype == WORD else np.dtype(self.dtype)
 
-    @property
-    def stored_dtype(self) -> str:
-        """The dtype name that holds the variable for any ``beta`` (a data set's arrays)."""
-        return self.array_dtype(BETA_BITS_MAX).name
+    def stored_dtype(self, beta_bits: int | None) -> np.dtype:
+        """The dtype of the variable in a file (``simulate``'s and a data set's, the one schema):
+        the word in the smallest unsigned type that holds ``2**beta - 1`` (``uint16`` at 12 bits;
+        ``None``: the widest word, 32 bits), the truth's float64 as float32 (its relative
+        precision 6e-8 is far below any noise it is compared with), the rest as in the pass."""
+        if self.dtype == WORD:
+            return np.dtype(np.min_scalar_type(2 ** (BETA_BITS_MAX if beta_bits is None else beta_bits) - 1))
+        return np.dtype("float32") if self.dtype == "float64" else np.dtype(self.dtype)
 
 
 #: The one table of the pass's variables, in dataset order.
 PASS_VARIABLES: tuple[Variable, ...] = (
-    Variable("dn", STAGE_DIMS, WORD, "DN", "DTDI stage word (paper eq. 1-2, 4)"),
+    Variable("dn", STAGE_DIMS, WORD, "DN", "DTDI stage word (paper eq. 1-2, 4)", pedestal="yes"),
     Variable("mean_dn", STAGE_DIMS, "float64", "DN",
-             "exact expectation of the stage word (full-well, ADC and word clips included)", truth=True),
+             "exact expectation of the stage word (full-well, ADC and word clips included)", truth=True,
+             pedestal="yes"),
     Variable("linear_dn", STAGE_DIMS, "float64", "DN",
-             "expectation of the stage word in the linear model, before any clip", truth=True),
+             "expectation of the stage word in the linear model, before any clip", truth=True,
+             pedestal="yes"),
     Variable("noise_std_dn", STAGE_DIMS, "float64", "DN",
              "temporal standard deviation of the stage word (EMVA 1288: every read's variance and the "
              "word's clip, exact for the sensor's chain)", truth=True),
@@ -92,13 +100,26 @@ PASS_VARIABLES: tuple[Variable, ...] = (
     Variable("reflectance", STAGE_DIMS, "float32", "1",
              "target reflectance integrated by the stage pixel's footprints", truth=True),
     Variable("clipped", STAGE_DIMS, "bool", "1",
-             "a read hit full well or the ADC top, or the word hit 2**beta - 1", truth=True),
+             "a read hit full well or the ADC top, or the word hit 2**beta - 1 (this draw)", truth=True),
     Variable("gamma_hdr", IMAGE_DIMS, "float32", "DN",
-             "Gamma_HDR, paper eq. 11, in stage-mu2 units, pedestal removed"),
+             "Gamma_HDR, paper eq. 11 of the stage words, in stage-mu2 units, offsets (pedestal and "
+             "accumulated black offset) removed", pedestal="no"),
     Variable("gamma_hdr_source", IMAGE_DIMS, "int16", "1", "stage each Gamma_HDR pixel came from"),
+    Variable("true_hdr_dn", IMAGE_DIMS, "float32", "DN",
+             "the true HDR target: the noise-free stage-mu2 signal without any clip (linear_dn of stage "
+             "mu2 less its offsets), stage-mu2 units", truth=True, pedestal="no"),
+    Variable("eq11_expected_dn", IMAGE_DIMS, "float32", "DN",
+             "eq. 11 of the expected stage words (mean_dn of mu1, mu2 clipped to the word), offsets "
+             "removed, stage-mu2 units: eq. 11 without noise, not the truth", truth=True, pedestal="no"),
+    Variable("stage_clip_flags", IMAGE_DIMS, "uint8", "1",
+             "bit 0: stage mu1, bit 1: stage mu2 not clear of its clips (a clip takes more from the "
+             "stage's expectation than from a normal read 4 sigma below its clip)", truth=True),
+    Variable("hdr_recoverable", IMAGE_DIMS, "bool", "1",
+             "some fused stage is clear of its clips (stage_clip_flags < 3): the true HDR target is "
+             "recoverable from the stage words", truth=True),
     Variable("gamma_hdr_error", IMAGE_DIMS, "float32", "1",
-             "relative error of Gamma_HDR against its exact expectation (linear_dn of stage mu2 less "
-             "the pedestal; nan below 1 DN)", truth=True, map=True),
+             "relative error of Gamma_HDR against the true HDR target true_hdr_dn (nan below 1 DN)",
+             truth=True, map=True),
     Variable("tdi_light_ratio", IMAGE_DIMS, "float32", "1",
              "TDI-window light ratio r = (photons_mu2 / mu2) / (photons_mu1 / mu1); eq. 11 assumes 1",
              truth=True, map=True),
@@ -117,11 +138,13 @@ def pass_variables(
                  and (maps or not v.map))
 
 
-def stage_pixel_bytes(beta_bits: int | None, *, truth: bool) -> int:
+def stage_pixel_bytes(beta_bits: int | None, *, truth: bool, stored: bool = False) -> int:
     """Bytes per stage pixel of the stage variables [bytes]: in a pass of ``beta_bits``-bit
-    words, or as stored for any ``beta`` (``None``)."""
+    words (``None``: the widest), or as stored in a file (``stored``:
+    :meth:`Variable.stored_dtype`)."""
     beta = BETA_BITS_MAX if beta_bits is None else beta_bits
-    return sum(v.array_dtype(beta).itemsize for v in pass_variables(STAGE_DIMS, truth=truth))
+    return sum((v.stored_dtype(beta) if stored else v.array_dtype(beta)).itemsize
+               for v in pass_variables(STAGE_DIMS, truth=truth))
 
 
 def pass_dtypes(
@@ -139,63 +162,21 @@ def pass_dtypes(
 
 
 def variable_attrs(cfg: BenchConfig, name: str) -> dict[str, Any]:
-    """``units`` and ``long_name`` of a pass variable; a truth variable also says whether it is
-    exact for the sensor's chain (``truth_exact``: 1 or 0, and ``truth_not_exact``: why not)."""
+    """``units`` and ``long_name`` of a pass variable, ``pedestal_included`` (``"yes"``,
+    ``"no"`` or ``"not applicable"``) with the pedestal ``pedestal_dn`` [DN] where it applies; a
+    truth variable also says whether it is exact for the sensor's chain (``truth_exact``: 1 or 0,
+    and ``truth_not_exact``: why not)."""
     var = VARIABLES_BY_NAME[name]
-    attrs: dict[str, Any] = {"units": var.units, "long_name": var.doc}
+    attrs: dict[str, Any] = {"units": var.units, "long_name": var.doc,
+                             "pedestal_included": var.pedestal or "not applicable"}
+    if var.pedestal:
+        attrs["pedestal_dn"] = pedestal_dn(cfg)
     if var.truth:
         chain = sensor_chain(cfg.sensor)
         attrs["truth_exact"] = int(not chain.not_exact)
         if chain.not_exact:
             attrs["truth_not_exact"] = "; ".join(chain.not_exact)
     return attrs
-
-
-#: units and long names of the pass's coordinates
-COORD_ATTRS = {
-    "line": {"units": "1", "long_name": "scene line (material at line * delta along the track)"},
-    "column": {"units": "1", "long_name": "sensor column"},
-    "stage": {"units": "1", "long_name": "DTDI stage m (rows summed)"},
-}
-
-
-def pass_coords(cfg: BenchConfig, st: tuple[int, ...]) -> dict[str, np.ndarray]:
-    """The coordinates ``stage``, ``line``, ``column`` of a pass."""
-    return {"stage": np.asarray(st, dtype=np.int64), "line": np.arange(cfg.lines),
-            "column": np.arange(cfg.sensor.columns)}
-
-
-def pass_attrs(
-    cfg: BenchConfig, seed: int | np.random.SeedSequence | np.random.Generator, setup: RenderSetup, *,
-    fused: bool,
-) -> dict[str, Any]:
-    """The attributes of a pass's dataset: the resolved config as TOML text and its SHA-256, the
-    seed, the version, engine, variant, ``beta_bits``, pedestal [DN], ``t_int_s`` [s], frames and,
-    when fused, ``mu1`` and ``mu2``."""
-    attrs: dict[str, Any] = dict(
-        title=f"bench_sim simulation of {cfg.name}",
-        config=config_to_toml_text(cfg),
-        config_sha256=config_sha256(cfg),
-        seed=int(seed) if isinstance(seed, int | np.integer) else -1,
-        version=__version__,
-        engine=str(setup.info["engine"]),
-        variant=str(setup.info["variant"]),
-        beta_bits=int(cfg.dtdi.beta_bits),
-        pedestal_dn=pedestal_dn(cfg),
-        t_int_s=float(setup.geom.t_int_s),
-        frames=int(setup.frames),
-    )
-    chain = sensor_chain(cfg.sensor).provenance()
-    attrs.update(sensor_chain="\n".join(chain["sensor_chain"]), truth_exact=int(chain["truth_exact"]))
-    if "truth_not_exact" in chain:
-        attrs["truth_not_exact"] = "; ".join(chain["truth_not_exact"])
-    if isinstance(seed, np.random.SeedSequence):
-        attrs.update(seed_entropy=str(seed.entropy), seed_spawn_key=str(list(seed.spawn_key)))
-    if fused:
-        attrs.update(mu1=int(cfg.fusion.mu1), mu2=int(cfg.fusion.mu2))
-    return attrs
-
-
 
 
 def pedestal_dn(cfg: BenchConfig) -> float:

@@ -32,6 +32,7 @@ from bench_sim.pipeline import (
     Variable,
     pass_variables,
     run_pass,
+    stored_dataset,
 )
 from bench_sim.render.exposures import RenderSetup
 from bench_sim.sensor.dtdi import check_stages, frames_needed
@@ -180,19 +181,23 @@ def parse_stages_arg(text: str, rows: int) -> tuple[int, ...]:
 def tiff_dtype(var: Variable) -> np.dtype:
     """The 32-bit TIFF sample type of a variable: ``uint32`` for integer and boolean variables,
     ``float32`` for the others."""
-    return np.dtype(np.uint32 if np.dtype(var.stored_dtype).kind in "uib" else np.float32)
+    return np.dtype(np.uint32 if var.stored_dtype(None).kind in "uib" else np.float32)
 
 
 def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, Any]) -> list[str]:
     """Write a simulation into ``folder`` as ``fmt`` (see :data:`FORMATS`); returns the names.
 
     ``zarr``: ``simulation.zarr`` (Zarr v3, consolidated metadata: ``xarray.open_zarr`` opens it);
-    ``netcdf``: ``simulation.nc``; ``tiff``: one 32-bit TIFF per stage and variable,
+    ``netcdf``: ``simulation.nc``; both in the one file schema of ``simulate`` and the data sets
+    (:func:`bench_sim.pipeline.stored_dataset`: words in the smallest unsigned type, the truth in
+    float32, chunks of whole stages); ``tiff``: one 32-bit TIFF per stage and variable,
     ``stage_MMM_VARIABLE.tiff`` (integer and boolean variables uint32, the others float32), ``gamma_hdr.tiff``
     and ``gamma_hdr_source.tiff`` when fused, each with its units and the provenance as JSON in the
     ImageDescription tag, plus ``meta.json`` (provenance, units, file list and, with slanted
     edges, the MTF50s of :func:`bench_sim.measure.sharpness.sharpness_summary`).
     """
+    if fmt in ("zarr", "netcdf"):
+        ds = stored_dataset(ds, int(ds.attrs["beta_bits"]))
     if fmt == "zarr":
         with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
             warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)

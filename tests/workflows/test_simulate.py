@@ -11,7 +11,7 @@ import pytest
 import bench_sim
 from bench_sim.config import config_from_dict, config_to_toml_dict
 from bench_sim.errors import BenchSimError
-from bench_sim.pipeline import PASS_VARIABLES, stage_pixel_bytes
+from bench_sim.pipeline import PASS_VARIABLES, stage_pixel_bytes, stored_dataset
 from bench_sim.sensor import stage_mean_var_dn
 from bench_sim.sensor.model import stage_offset_dn
 from bench_sim.workflows.dataset.reader import FUSED_VARIABLES, STAGE_VARIABLES
@@ -152,10 +152,10 @@ def test_dataset_variables_units_and_provenance():
     for v in PASS_VARIABLES:
         assert ds[v.name].dims == v.dims and ds[v.name].dtype == v.array_dtype(ds.attrs["beta_bits"]), v
         assert (ds[v.name].attrs["units"], ds[v.name].attrs["long_name"]) == (v.units, v.doc), v
-    stored = {**STAGE_VARIABLES, **FUSED_VARIABLES}  # the data set: the pass's, truth in float32, ...
-    narrow = {v.name: "float32" if v.stored_dtype == "float64" else v.stored_dtype for v in PASS_VARIABLES
-              if not v.map}  # simulate's truth maps (gamma_hdr_error, tdi_light_ratio) are not stored
-    assert narrow.items() <= stored.items()  # ... then its training targets (issue 24)
+    # the data set stores every variable of the pass (simulate's schema, issue 34)
+    assert (*STAGE_VARIABLES, *FUSED_VARIABLES) == tuple(v.name for v in PASS_VARIABLES)
+    stored = {v.name: v.stored_dtype(12).name for v in PASS_VARIABLES}
+    assert stored["dn"] == "uint16" and stored["mean_dn"] == "float32" and stored["clipped"] == "bool"
     assert stage_pixel_bytes(12, truth=False) == ds.dn.dtype.itemsize == 2
     per_pixel = sum(ds[v].dtype.itemsize for v in ds.data_vars if "stage" in ds[v].dims)
     assert stage_pixel_bytes(12, truth=True) == per_pixel
@@ -318,12 +318,13 @@ def test_cli_writes_each_format(tmp_path, fmt):
     )
     assert res.exit_code == 0, res.output
     ref = bench_sim.simulate(_tiny_toml(tmp_path), stages=[2, 8], seed=4)
+    stored = stored_dataset(ref, 12)  # the files' schema: the truth in float32 (issue 34)
     if fmt == "zarr":
         ds = xr.open_zarr(out / "simulation.zarr").load()
-        assert ds.identical(ref)
+        assert ds.identical(stored) and ds.mean_dn.dtype == np.float32
     elif fmt == "netcdf":
         ds = xr.open_dataset(out / "simulation.nc").load()
-        assert ds.identical(ref)
+        assert ds.identical(stored)
     else:
         meta = json.loads((out / "meta.json").read_text())
         assert meta["seed"] == 4 and meta["version"] == bench_sim.__version__ and meta["config_sha256"]

@@ -42,8 +42,8 @@ def test_the_sink_holds_only_the_rows_in_flight(tmp_path, monkeypatch):
     progress and a chunk of frames (16); the lines written are the pass's."""
     import zarr
 
-    small_chunks = lambda shape, dt: (*(1,) * (len(shape) - 2), 8, 48)  # noqa: E731
-    monkeypatch.setattr(simulate_store, "zarr_auto_chunks", small_chunks)
+    small_chunks = lambda dims, shape: (*(1,) * (len(shape) - 2), 8, 48)  # noqa: E731
+    monkeypatch.setattr(simulate_store, "store_chunks", small_chunks)
     monkeypatch.setattr(one_pass, "TRUTH_BAND_LINES", 16)
     cfg = with_overrides(load_config(), {**TINY, "lines": 160})
     most = {}
