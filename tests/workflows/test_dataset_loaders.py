@@ -144,7 +144,8 @@ def test_zarr_store_has_units_physical_coordinates_and_constants(fixed):
     for name in [*ds.data_vars, *ds.coords]:
         assert ds[name].attrs.get("units") and ds[name].attrs.get("long_name"), name
     # each sample's own coordinates (issue 34)
-    assert ds["along_track_mm"].dims == ("sample", "line") and ds["across_track_mm"].dims == ("sample", "column")
+    assert ds["along_track_mm"].dims == ("sample", "line")
+    assert ds["across_track_mm"].dims == ("sample", "column")
     assert ds["time_s"].attrs["units"] == "s"
     # one line is one surface travel per line period: object pixel (5.5 um / magnification)
     step = np.diff(ds["along_track_mm"].values, axis=1)

@@ -84,7 +84,9 @@ class SceneValue:
         if self.how == "dist":
             params = {k: v for k, v in self.value.model_dump().items() if k != "dist"}
             return f"{self.value.dist}(" + ", ".join(f"{k}={v}" for k, v in params.items()) + ")"
-        return {"fixed": f"{self.value:g}", "listed": f"listed {self.value}", "rig": "over the rig"}[self.how]
+        if self.how == "fixed":
+            return f"{self.value:g}"
+        return f"listed {self.value}" if self.how == "listed" else "over the rig"
 
     def as_json(self) -> Any:
         return self.value.model_dump() if self.how == "dist" else ("rig" if self.how == "rig" else self.value)
