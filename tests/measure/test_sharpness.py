@@ -102,13 +102,27 @@ def test_along_track_mtf50_falls_with_stage_only_with_a_sync_error(passes) -> No
     np.testing.assert_allclose(without, without[0], rtol=0.01)
 
 
-def test_across_track_mtf50_does_not_depend_on_the_stage(passes) -> None:
+def test_across_track_mtf50_depends_on_the_stage_only_under_a_sync_error(passes) -> None:
+    """Without a sync error the across-track MTF50 is the same at every stage; with one, the
+    slanted edge (5 deg) sees the stage's along-track spread ``m d`` lines sideways, ``m`` copies
+    ``d tan 5deg`` px apart: the across-track SFR ratio to stage 1 follows that kernel and the
+    MTF50 falls a little (issue 34: it does depend on the stage)."""
     for eps, ds in passes.items():
         across = ds["mtf50_across"].values
         assert np.all(np.isfinite(across))
-        np.testing.assert_allclose(across, np.median(across), rtol=0.03, err_msg=f"sync_error {eps}")
         # across the track the pixel aperture is the sharpest part: above the along-track MTF50
         assert np.all(across > ds["mtf50_along"].values[0])
+    np.testing.assert_allclose(passes[0.0]["mtf50_across"].values, passes[0.0]["mtf50_across"].values[0],
+                               rtol=0.01)
+    ds, f = passes[0.2], SFR_FREQUENCY_CYC_PX
+    sfr = ds["sfr_across"].values
+    d = 0.2 / 1.2 * np.tan(np.radians(5.0))
+    for m in (12, 16):
+        ratio = sfr[STAGES.index(m)] / sfr[0]
+        want = _dirichlet(f, m, d)
+        np.testing.assert_allclose(ratio[f <= 0.5], want[f <= 0.5], atol=0.012, err_msg=str(m))
+    drop = 1.0 - ds["mtf50_across"].values[-1] / ds["mtf50_across"].values[0]
+    assert 0.005 < drop < 0.05
 
 
 def test_gamma_hdr_and_variables(passes) -> None:

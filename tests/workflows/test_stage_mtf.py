@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench_sim.config import with_overrides
 from bench_sim.io import read_png_text
 from bench_sim.workflows.reproduce.stage_mtf import (
     COMPANION_LINES,
@@ -30,9 +31,11 @@ def test_companion_pass_keeps_the_bench_and_swaps_the_target() -> None:
     comp = companion_config(cfg)
     assert comp.target.layout == "slanted_edges" and cfg.target.layout == "paper"
     assert comp.lines == COMPANION_LINES and comp.sensor.columns == 128
+    patterns = {"columns": 0, "prnu_enabled": False, "dsnu_enabled": False, "column_fpn": False}
     for section in ("sensor", "timing", "dtdi", "lens", "drum", "lights", "fusion"):
         a, b = getattr(comp, section).model_dump(), getattr(cfg, section).model_dump()
-        assert a == b or section == "sensor" and {**a, "columns": 0} == {**b, "columns": 0}, section
+        assert a == b or section == "sensor" and {**a, **patterns} == {**b, **patterns}, section
+    assert not (comp.sensor.prnu_enabled or comp.sensor.dsnu_enabled or comp.sensor.column_fpn)
 
 
 @pytest.mark.physics
@@ -52,3 +55,17 @@ def test_mtf50_vs_stage_files(tmp_path: Path) -> None:
     np.testing.assert_allclose(across, np.median(across), rtol=0.06)
     assert float(rows[-1]["mtf50_along_cyc_px"]) == pytest.approx(along[3], rel=0.03)  # HDR from stage 16
     assert read_png_text(tmp_path / "mtf50_vs_stage.png")["seed"] == 3
+    assert "noise-free" in read_png_text(tmp_path / "mtf50_vs_stage.png")["noise"]
+
+
+@pytest.mark.physics
+def test_mtf50_vs_stage_is_noise_free() -> None:
+    """No noise makes a trend: without a sync error nothing changes with the stage but the noise,
+    and the companion's MTF50s are the same at every stage to 1e-5 (the expected words of a
+    sensor without fixed patterns; a noisy pass scatters them by per cents)."""
+    cfg = with_overrides(_bench(), {"timing": {"sync_error": 0.0}})
+    ds = measure_stage_mtf(cfg, seed=3)
+    for d in ("along", "across"):
+        v = ds[f"mtf50_{d}"].values
+        np.testing.assert_allclose(v, v[0], rtol=1e-5, err_msg=d)
+    assert np.array_equal(ds["dn"].values, ds["mean_dn"].values)
