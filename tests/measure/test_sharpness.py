@@ -107,7 +107,7 @@ def test_across_track_mtf50_depends_on_the_stage_only_under_a_sync_error(passes)
     slanted edge (5 deg) sees the stage's along-track spread ``m d`` lines sideways, ``m`` copies
     ``d tan 5deg`` px apart: the across-track SFR ratio to stage 1 follows that kernel and the
     MTF50 falls a little (issue 34: it does depend on the stage)."""
-    for eps, ds in passes.items():
+    for ds in passes.values():
         across = ds["mtf50_across"].values
         assert np.all(np.isfinite(across))
         # across the track the pixel aperture is the sharpest part: above the along-track MTF50
