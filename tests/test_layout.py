@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
 import json
 import re
 import subprocess
@@ -131,8 +132,57 @@ def _resolves(dotted: str) -> bool:
     return False
 
 
+#: endings of the file names the docs quote (``manifest.csv``, ``paper_rig.toml``)
+FILE_SUFFIXES = {"py", "toml", "md", "json", "csv", "png", "zarr", "nc", "tiff", "tif", "exr", "npy", "npz",
+                 "parquet", "txt", "xml", "sh", "tex"}
+#: libraries whose dotted names the docs quote (checked when installed)
+LIBRARIES = {"numpy", "pandas", "xarray", "torch", "dask", "os", "scipy", "zarr", "mitsuba", "drjit"}
+#: dotted names in the docs that are notation, not code or config (EMVA 1288's symbols)
+NOTATION = {"mu_e.sat", "mu_p.sat"}
+_SPAN = re.compile(r"`([^`\n]+)`")
+_FENCE = re.compile(r"^```.*?^```", re.M | re.S)
+_DOTTED = re.compile(r"(?<![\w./-])([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+)(?![\w/])")
+
+
+def _config_names() -> set[str]:
+    from bench_sim.config.catalogue import config_keys
+
+    keys = {k.key for k in config_keys()}
+    return keys | {".".join(k.split(".")[:i]) for k in keys for i in range(1, k.count(".") + 1)}
+
+
+def _dotted_name_ok(name: str, config: set[str]) -> bool:
+    """A dotted name of the docs, with or without ``bench_sim.``: a module or attribute of bench_sim
+    (``workflows.dataset.splits.split_of`` as well), a config key or table, a file name, a
+    library's name, or notation."""
+    if name.startswith("bench_sim."):
+        return _resolves(name)
+    first, last = name.split(".")[0], name.rsplit(".", 1)[1]
+    if last.lower() in FILE_SUFFIXES or name in config or name in NOTATION:
+        return True
+    if first in LIBRARIES:
+        return _resolves(name) or importlib.util.find_spec(first) is None
+    return _resolves(f"bench_sim.{name}")
+
+
+@pytest.mark.parametrize("name, ok", [
+    ("experiments.execution.task_seed_sequence", False),  # a module that no longer exists
+    ("runtime.execution.task_seed_sequence", True),
+    ("bench_sim.runtime.execution.no_such_name", False),
+    ("lights.strong.irradiance_w_m2", True),
+    ("lights.strong.flux", False),
+    ("manifest.csv", True),
+    ("numpy.random.no_such_name", False),
+])
+def test_dotted_names_are_judged(name: str, ok: bool) -> None:
+    assert _dotted_name_ok(name, _config_names()) == ok
+
+
 def test_documented_names_resolve() -> None:
-    """Every ``bench_sim.x.y`` that the README and docs/ name is a module or attribute that exists."""
+    """Every ``bench_sim.x.y`` that the README and docs/ name is a module or attribute that exists,
+    and so is every dotted name in their code spans without the prefix (``experiments.execution.x``
+    named a module that no longer exists): a config key, a file name or a library's name
+    otherwise."""
     root = PACKAGE.parent
     docs = [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
     bad = sorted(
@@ -142,6 +192,12 @@ def test_documented_names_resolve() -> None:
         if not _resolves(name)
     )
     assert not bad, f"documented names that do not exist: {bad}"
+    config = _config_names()
+    spans = {d: [n for span in _SPAN.findall(_FENCE.sub("", d.read_text())) for n in _DOTTED.findall(span)]
+             for d in docs}
+    bad = sorted({f"{d.relative_to(root)}: {n}" for d, names in spans.items() for n in names
+                  if not _dotted_name_ok(n, config)})
+    assert not bad, f"dotted names in the docs that are no module, attribute, config key or file: {bad}"
     paths = sorted(
         f"{d.relative_to(root)}: {p}"
         for d in docs

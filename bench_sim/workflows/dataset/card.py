@@ -148,7 +148,7 @@ def _randomized_rows(spec: DatasetSpec, df: pd.DataFrame) -> list[list[Any]]:
             if key == "target.image":
                 drawn += " (samples with layout image)"
         rows.append([f"`{key}`", described.replace("|", "/"), drawn.replace("|", "/")])
-    for key, sv in spec.scene.items():  # where the windows sit, the light levels (dataset.scene)
+    for key, sv in spec.scene.items():  # where the windows sit, the light levels (dataset.sample_scene)
         col = done[f"scene.{key}"] if len(done) else df[f"scene.{key}"].iloc[:0]
         drawn = (f"{_fmt(col.min())} .. {_fmt(col.median())} .. {_fmt(col.max())} (min .. median .. max)"
                  if len(col) else "-")

@@ -65,7 +65,7 @@ from bench_sim.workflows.dataset.reader import (
     journal,
     read_records,
 )
-from bench_sim.workflows.dataset.scene import SampleScene, peak_signal_fraction, scale_lights
+from bench_sim.workflows.dataset.sample_scene import SampleScene, peak_signal_fraction, scale_lights
 from bench_sim.workflows.dataset.spec import DatasetSpec, check_sample_configs, load_spec, sample_streams
 from bench_sim.workflows.dataset.splits import split_map
 from bench_sim.workflows.dataset.store import (
@@ -109,7 +109,7 @@ class SampleTask:
     stages: tuple[int, ...]
     stream: np.random.SeedSequence
     camera_seed: int | None = None  # camera = "fixed": the dataset's root seed (targets.fixed_camera)
-    scene: dict[str, float] = field(default_factory=dict)  # its [scene] values (dataset.scene)
+    scene: dict[str, float] = field(default_factory=dict)  # its [scene] values (dataset.sample_scene)
 
 
 @dataclass
@@ -191,7 +191,7 @@ def make_sample(task: SampleTask, records: LightRecords | None = None) -> Sample
     ``records``: the light records of its scene made by another task (:func:`sample_inputs`),
     put in this process's cache for the pass; without them the pass finds them in the cache or
     renders them. With ``scene.peak_of_mu2_clip`` the lights are scaled first
-    (:func:`~bench_sim.workflows.dataset.scene.peak_signal_fraction`)."""
+    (:func:`~bench_sim.workflows.dataset.sample_scene.peak_signal_fraction`)."""
     if records is not None:
         install_records(records)
     cfg, scale = task.config, 1.0

@@ -71,7 +71,7 @@ from bench_sim.io import sha256_file
 from bench_sim.runtime.execution import task_seed_sequence
 from bench_sim.sensor.dtdi import check_stages
 from bench_sim.workflows.dataset.distributions import DIST_MODELS, DISTRIBUTIONS, Distribution, Glob, Strict
-from bench_sim.workflows.dataset.scene import SceneValue, draw_scene, parse_scene, place_window
+from bench_sim.workflows.dataset.sample_scene import SceneValue, draw_scene, parse_scene, place_window
 from bench_sim.workflows.dataset.splits import DEFAULT_SPLITS, check_splits
 from bench_sim.workflows.dataset.targets import check_camera
 from bench_sim.workflows.preflight import SeedField
@@ -109,7 +109,7 @@ class _SpecFile(Strict):
     randomize: dict[str, Any] = {}
     splits: dict[str, Any] | None = None  # bench_sim.workflows.dataset.splits
     camera: Literal["per_sample", "fixed"] = "per_sample"  # bench_sim.workflows.dataset.targets
-    scene: dict[str, Any] = {}  # bench_sim.workflows.dataset.scene
+    scene: dict[str, Any] = {}  # bench_sim.workflows.dataset.sample_scene
 
 
 def nested(dotted: Mapping[str, Any]) -> dict[str, Any]:
@@ -208,7 +208,7 @@ class DatasetSpec:
     def draw(self, index: int) -> dict[str, Any]:
         """The randomised values of sample ``index`` (as the manifest lists them: image paths
         relative to the spec folder), then its ``[scene]`` values as ``scene.<key>``
-        (:mod:`bench_sim.workflows.dataset.scene`), from one generator in that order."""
+        (:mod:`bench_sim.workflows.dataset.sample_scene`), from one generator in that order."""
         rng = np.random.default_rng(sample_streams(self.seed, index)[0])
         values = {key: dist.draw(rng) for key, dist in self.randomize.items()}
         if self.scene:
