@@ -182,8 +182,11 @@ def estimate_simulate(cfg: BenchConfig, stages: Iterable[int], fmt: str | None =
     else:
         mem[f"stage images and truth ({len(st)} stages x {cfg.lines} x {cfg.sensor.columns})"] = arrays + hdr
         mem["file encoding (largest variable)"] = n_pix * 8
-    # on disk the words take the widest word's bytes (an upper bound for any beta)
-    disk = {"stage images and truth": n_pix * stage_pixel_bytes(None, truth=True), "hdr and maps": hdr}
+    # on disk: the stored schema (the word in its smallest type, the truth in float32), uncompressed
+    stored = stage_pixel_bytes(cfg.dtdi.beta_bits, truth=True, stored=True)
+    image_stored = sum(v.stored_dtype(cfg.dtdi.beta_bits).itemsize for v in images)
+    disk = {"stage images and truth": n_pix * stored,
+            "hdr and maps": cfg.lines * cfg.sensor.columns * image_stored}
     return ResourceEstimate("simulate", mem, disk, _hint(cfg, f"the stages ({len(st)})"))
 
 

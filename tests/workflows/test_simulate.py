@@ -160,6 +160,7 @@ def test_dataset_variables_units_and_provenance():
     per_pixel = sum(ds[v].dtype.itemsize for v in ds.data_vars if "stage" in ds[v].dims)
     assert stage_pixel_bytes(12, truth=True) == per_pixel
     assert stage_pixel_bytes(None, truth=True) == 4 + 8 + 8 + 8 + 8 + 4 + 1  # dn, mean_dn, linear_dn, ...
+    assert stage_pixel_bytes(12, truth=True, stored=True) == 2 + 4 + 4 + 4 + 4 + 4 + 1  # in the files
 
 
 def test_same_seed_same_data_and_no_hdr_without_both_stages():
