@@ -215,3 +215,22 @@ def test_scene_values_are_drawn_listed_or_over_the_rig(tmp_path):
     peaks = np.array([v["scene.peak_of_mu2_clip"] for v in values])
     assert np.all((peaks >= 0.5) & (peaks < 8.0))
     assert spec.draw(7) == values[7]  # the sample's own stream
+
+
+def test_true_target_says_when_the_truth_is_not_exact(tmp_path):
+    """A chain with a plug-in that declares no truth: the true target carries the same
+    ``truth_exact = 0`` (and why) as every truth variable; without it, 1."""
+    from bench_sim.pipeline import run_pass, variable_attrs
+    from tests.conftest import tiny_cfg
+
+    (tmp_path / "fx.py").write_text("def same(x, *, rng):\n    return x\n")
+    plain = tiny_cfg(lines=8)
+    black_box = tiny_cfg(lines=8, sensor={"effects": {"box": {
+        "kind": "plugin", "function": f"{tmp_path / 'fx.py'}:same", "point": "digital"}}})
+    for cfg, exact in ((plain, 1), (black_box, 0)):
+        ds = run_pass(cfg, (2, 8), 0).dataset
+        for name in ("true_hdr_dn", "eq11_expected_dn", "stage_clip_flags", "hdr_recoverable"):
+            attrs = ds[name].attrs
+            assert attrs == variable_attrs(cfg, name) and attrs["truth_exact"] == exact, name
+            assert attrs.get("truth_not_exact") == ds["mean_dn"].attrs.get("truth_not_exact"), name
+        assert "truth_exact" not in ds["gamma_hdr"].attrs  # the fused words are no truth
