@@ -68,6 +68,12 @@ def stage_offsets_dn(
         The stages ``m``.
     pedestal_dn
         The words' pedestal ``P`` [DN], if not ``dtdi.pedestal_dn`` (a measurement's own).
+
+    Returns
+    -------
+    dict of int to float
+        ``o_m = P + m b [subtract_black off]`` [DN] (:func:`bench_sim.sensor.model.stage_offset_dn`;
+        paper eq. 4 with the black offset and the pedestal of the word).
     """
     return {int(m): stage_offset_dn(cfg.sensor, cfg.dtdi, int(m), pedestal_dn) for m in stages}
 
@@ -79,8 +85,25 @@ def eq11_signal_threshold_dn(
     ``(Phi_FS - o_mu2) / (mu2 / mu1)`` with ``Phi_FS = 2**beta`` (eq. 4): the signal range left
     to ``Gamma2``'s word above its offset decides where it clips.
 
-    E.g. 504 DN for the paper rig (``mu1 = 10``, ``mu2 = 80``, ``beta = 12``, ``P = 64``);
-    ``Phi_FS / (mu2/mu1) = 512`` DN without any offset.
+    Parameters
+    ----------
+    cfg
+        The bench (``dtdi.beta_bits``, its offsets).
+    mu1, mu2
+        The stages (default: ``fusion.mu1``, ``fusion.mu2``).
+    pedestal_dn
+        The words' pedestal [DN], if not ``dtdi.pedestal_dn``.
+
+    Returns
+    -------
+    float
+        The threshold [DN, stage-``mu1`` units]: 504 DN for the paper rig (``mu1 = 10``,
+        ``mu2 = 80``, ``beta = 12``, ``P = 64``); ``Phi_FS / (mu2/mu1) = 512`` DN without any
+        offset (the paper's).
+
+    References
+    ----------
+    The reproduced paper, eq. 4, 5 and 11.
     """
     m1, m2 = _pair(cfg, mu1, mu2)
     off2 = stage_offset_dn(cfg.sensor, cfg.dtdi, m2, pedestal_dn)
@@ -146,6 +169,11 @@ def true_hdr_dn(
         The stage (default ``fusion.mu2``).
     pedestal_dn
         The pedestal, if not ``dtdi.pedestal_dn``.
+
+    Returns
+    -------
+    numpy.ndarray
+        The target [DN, stage-``mu2`` units], the shape of ``linear_dn_mu2``.
     """
     m2 = int(cfg.fusion.mu2 if mu2 is None else mu2)
     offset = stage_offset_dn(cfg.sensor, cfg.dtdi, m2, pedestal_dn)
@@ -169,6 +197,22 @@ def eq11_expected_dn(
     from the threshold (there the noisy switch mixes both branches), and it is eq. 11's answer
     without noise: not the truth. Against :func:`true_hdr_dn` it is off where ``Gamma2`` clips
     below the threshold or the light changes along the TDI window (the spot's edge).
+
+    Parameters
+    ----------
+    cfg
+        The bench.
+    mean_dn_mu1, mean_dn_mu2
+        ``mean_dn`` of stages ``mu1`` and ``mu2`` [DN] (the exact expectations of the words).
+    mu1, mu2
+        The stages (default: ``fusion.mu1``, ``fusion.mu2``).
+    pedestal_dn
+        The pedestal, if not ``dtdi.pedestal_dn``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Eq. 11 of the expected words [DN, stage-``mu2`` units, offsets removed, float64].
     """
     top = float(word_clip_dn(cfg.dtdi.beta_bits))
     g1 = np.clip(np.asarray(mean_dn_mu1, dtype=np.float64), 0.0, top)

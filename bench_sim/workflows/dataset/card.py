@@ -235,7 +235,7 @@ def _how_made(spec: DatasetSpec, info: dict[str, Any], df: pd.DataFrame, cmd: st
         f"```sh\n{cmd}\n```", "",
         f"Root seed {spec.seed}. {info['streams']}. A sample's content depends only on (spec, seed, i): "
         "any number of workers, `--resume` and `--only i` give it bit for bit.", "",
-        "Splits: " + ", ".join(f"{k} {v} samples" for k, v in info["split_samples"].items())
+        "Splits (samples): " + ", ".join(f"{k} {v}" for k, v in info["split_samples"].items())
         + f" ({info['split_rule']}).", "",
         f"Base bench SHA-256 `{info['base']['config_sha256']}`; spec SHA-256 `{info['spec_sha256']}`"
         + (f"; image files: {', '.join(f'`{k}`' for k in spec.images)}" if spec.images else "") + ".", "",
