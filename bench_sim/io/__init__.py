@@ -65,7 +65,7 @@ from bench_sim.io.outputs import (
     output_set,
     read_output_record,
 )
-from bench_sim.io.tables import markdown_table, write_csv
+from bench_sim.io.tables import markdown_table, read_csv_columns, write_csv
 
 __all__ = [
     "atomic_path",
@@ -90,6 +90,7 @@ __all__ = [
     "read_png_text",
     "write_text",
     "write_csv",
+    "read_csv_columns",
     "write_emva_descriptor",
     "read_image",
     "read_image_channel",
