@@ -63,8 +63,8 @@ class _LightBase(Section):
     irradiance_w_m2: Annotated[float, Field(ge=0)] = 1.0
     spectrum: str = Field(
         "flat", description="spectral mode: 'flat', 'blackbody' (at temperature_k), a measured light "
-        "by name (CIE A: halogen; FL1..FL12: fluorescent; LED-B1..: white LEDs; lamps; see the named "
-        "spectra) or csv:FILE (wavelength_nm and one value column, relative to the config file)",
+        "by name (A: halogen; FL1..FL12: fluorescent; LED-B1..: white LEDs; lamps; the names are under "
+        "allowed) or csv:FILE (wavelength_nm and one value column, relative to the config file)",
     )
     temperature_k: Annotated[float, Field(ge=500, le=20000)] = 3200.0
     flicker_hz: Annotated[float, Field(ge=0, le=1e9)] = Field(

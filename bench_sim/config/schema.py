@@ -191,7 +191,7 @@ class TargetConfig(Section):
     reflectance_spectrum: str | None = Field(
         None, description="spectral mode: the print's reflectance spectrum, times the pattern's "
         "reflectance (1: the spectrum itself): a chart patch by name (ColorChecker N Ohta/dark skin, "
-        "...; see the named spectra) or csv:FILE (a print's or paper's spectrum); default: grey",
+        "...; the names are under allowed) or csv:FILE (a print's or paper's spectrum); default: grey",
     )
     # layout = "image" and the generated layouts (bench_sim.rig.target_sources)
     image: str | None = Field(
@@ -278,7 +278,7 @@ class SensorConfig(Section):
     )
     qe_spectrum: str | None = Field(
         None, description="spectral mode: a measured spectral response by name (a camera's channel: "
-        "Nikon 5100 (NPL)/green, ...; see the named spectra) or csv:FILE, instead of qe_curve; its "
+        "Nikon 5100 (NPL)/green, ...; the names are under allowed) or csv:FILE, instead of qe_curve; its "
         "shape, scaled so that QE at wavelength_m is quantum_efficiency",
     )
     full_well_e: PositiveFloat = 13500.0
