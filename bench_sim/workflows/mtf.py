@@ -179,8 +179,8 @@ def summary_line(summary: dict[str, Any], out: Path) -> str:
     med_txt = "-" if med is None else f"{med:.4f} cycles/px"
     sharp = sum(1 for e in edges if e["sharpened"])
     flag = f", {sharp} sharpened" if sharp else ""
-    return (f"{len(edges)} edges measured{refused}{flag}: median MTF50 {med_txt} along the "
-            f"{edges[0]['frequency_axis'].split()[0]} axis; wrote {out}")
+    axis = "edge normal" if edges[0]["frequency_axis"] == "edge normal" else "pixel rows / columns"
+    return f"{len(edges)} edges measured{refused}{flag}: median MTF50 {med_txt} along the {axis}; wrote {out}"
 
 
 def run_mtf(req: MtfRequest) -> dict[str, Any]:

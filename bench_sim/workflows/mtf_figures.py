@@ -19,6 +19,8 @@ __all__ = ["sfr_figure", "rois_figure", "stages_figure", "MAX_CURVES"]
 
 #: at most this many curves are drawn in ``sfr.png`` (every edge is in the CSV files)
 MAX_CURVES = 12
+#: ``rois.png`` shows every k-th pixel of an image larger than this [px]
+_SHOWN_PX = 1600
 
 
 def _pyplot() -> Any:
@@ -69,20 +71,24 @@ def sfr_figure(path: Path, readings: Sequence[EdgeReading], meta: dict[str, Any]
 
 def rois_figure(path: Path, image: np.ndarray, valid: np.ndarray, readings: Sequence[EdgeReading],
                 refusals: Sequence[EdgeRefusal], meta: dict[str, Any], title: str = "") -> None:
-    """The image (1st-99th percentile stretched, invalid pixels red) with every measured ROI
-    outlined and numbered, and the refused edges marked by their number in red."""
+    """The image (1st-99th percentile stretched, invalid pixels red; every k-th pixel of a large
+    one) with every measured ROI outlined and numbered, and the refused edges marked by their
+    number in red."""
     from matplotlib.patches import Rectangle
 
     plt = _pyplot()
     h, w = image.shape
+    k = max(1, math.ceil(max(h, w) / _SHOWN_PX))
+    img, ok = image[::k, ::k], valid[::k, ::k]
     scale = min(10.0 / w, 8.0 / h) * 100
     fig, ax = plt.subplots(figsize=(max(w * scale / 100, 3.0), max(h * scale / 100, 2.5) + 0.4), dpi=100)
-    finite = image[valid & np.isfinite(image)]
+    finite = img[ok & np.isfinite(img)]
     lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
-    shown = np.clip((np.where(valid, image, lo) - lo) / ((hi - lo) or 1.0), 0, 1)
+    shown = np.clip((np.where(ok, img, lo) - lo) / ((hi - lo) or 1.0), 0, 1).astype(np.float32)
     rgb = np.repeat(shown[..., None], 3, axis=-1)
-    rgb[~valid] = (0.8, 0.1, 0.1)
-    ax.imshow(rgb, interpolation="nearest")
+    rgb[~ok] = (0.8, 0.1, 0.1)
+    extent = (-0.5, img.shape[1] * k - 0.5, img.shape[0] * k - 0.5, -0.5)
+    ax.imshow(rgb, interpolation="nearest", extent=extent)
     for r in readings:
         x0, y0, x1, y1 = r.result.roi
         ax.add_patch(Rectangle((x0 - 0.5, y0 - 0.5), x1 - x0, y1 - y0, fill=False, ec="lime", lw=1.2))
