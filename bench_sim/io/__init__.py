@@ -19,7 +19,9 @@ Modules
 :mod:`~bench_sim.io.images`
     EXR, TIFF, PNG and NPY images: writers, the one reader and the one input-file check.
 :mod:`~bench_sim.io.tables`
-    CSV files with provenance lines, Markdown tables.
+    CSV files with provenance lines (and numeric CSV tables read), Markdown tables.
+:mod:`~bench_sim.io.spectral_data`
+    Measured spectra by name from colour-science, or from CSV files.
 :mod:`~bench_sim.io.emva_descriptor`
     The EMVA 1288 descriptor file.
 :mod:`~bench_sim.io.folder_lock`

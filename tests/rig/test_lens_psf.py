@@ -160,3 +160,15 @@ def test_nyquist_warning_for_a_perfect_lens() -> None:
     assert nyquist_warning(cfg) is None
     line = nyquist_warning(make_cfg(lens={"diffraction": False}))
     assert line is not None and "0.603 cycles/px" in line and "lens.diffraction = false" in line
+
+
+def test_narrow_band_diffraction_is_the_mono_one() -> None:
+    """Spectral mode weights the band's wavelengths; a 2-nm band around 550 nm is the mono lens."""
+    nu = np.linspace(0, 400e3, 9)
+    mono = lens_otf(make_cfg())
+    narrow = lens_otf(make_cfg(render={"spectral": True, "band_m": [549e-9, 551e-9]}))
+    broad = lens_otf(make_cfg(render={"spectral": True}))
+    assert mono is not None and narrow is not None and broad is not None
+    np.testing.assert_allclose(narrow.grid(np.zeros(1), nu), mono.grid(np.zeros(1), nu), atol=2e-3)
+    assert "400..700 nm" in broad.source
+    assert not np.allclose(broad.grid(np.zeros(1), nu), mono.grid(np.zeros(1), nu), atol=2e-3)
