@@ -9,9 +9,9 @@ engines then integrate it over each pixel (:mod:`bench_sim.render.engines`) and 
 samples it. Each block of texture rows (:data:`bench_sim.render.texture.BLOCK_ROWS`) is blurred
 with :attr:`TextureLens.margin_rows` real rows of the target either side (mirrored beyond the
 grid's ends) and its columns mirrored by :attr:`TextureLens.margin_cols`, in the Fourier domain
-(``rfft2``, the OTF at the block's frequencies, ``irfft2``; single precision, as the texture is
-stored, about 1e-6 of the texture's largest value): a block's values do not depend on which pass
-or chunk asked for it. The drum's curvature changes the scale by under 0.1 % over the
+(``rfft2``, the OTF at the block's frequencies, ``irfft2``, in double precision, so that a
+uniform target comes back uniform to the bit of its float32 texels): a block's values do not
+depend on which pass or chunk asked for it. The drum's curvature changes the scale by under 0.1 % over the
 default sensor's rows and is not followed; nor is a light that changes over the PSF (a spot's
 edge over a few pixels).
 """
@@ -53,8 +53,7 @@ class TextureLens:
         if got is None:
             fy = fft.fftfreq(shape[0], d=self.h_y_m)
             fx = fft.rfftfreq(shape[1], d=self.h_x_m)
-            h = self.otf.grid(fy, fx)
-            got = h.astype(np.complex64 if np.iscomplexobj(h) else np.float32)
+            got = self.otf.grid(fy, fx)
             self._cache[shape] = got
         return got
 
@@ -65,8 +64,8 @@ class TextureLens:
         from scipy import fft
 
         r, c = self.margin_rows, self.margin_cols
-        a = np.pad(np.asarray(raw, dtype=np.float32), ((pad_top, pad_bottom), (c, c)), mode="symmetric")
-        spec = fft.rfft2(a, workers=1)  # single precision, as the texture is stored
+        a = np.pad(np.asarray(raw, dtype=np.float64), ((pad_top, pad_bottom), (c, c)), mode="symmetric")
+        spec = fft.rfft2(a, workers=1)  # double precision: an even target stays even to the bit
         spec *= self._transfer(a.shape)
         out = fft.irfft2(spec, s=a.shape, workers=1)
         return np.ascontiguousarray(out[r : a.shape[0] - r, c : a.shape[1] - c], dtype=np.float32)
