@@ -77,8 +77,14 @@ class Spectrum:
 
 
 def _colour() -> Any:
-    import colour  # imported here: about 1.5 s, only when a name is looked up
-
+    """colour-science, imported here (about 1.5 s, only when a name is looked up) with numpy's
+    print options kept: its import sets them to numpy 1.13's (``str`` of a float64 to 12 digits),
+    which would change how every other library in the process writes numbers."""
+    options = np.get_printoptions()
+    try:
+        import colour
+    finally:
+        np.set_printoptions(**options)
     return colour
 
 

@@ -96,3 +96,15 @@ def test_config_keys_lists_the_names() -> None:
     assert "ColorChecker N Ohta/dark skin" in r.stdout
     r = runner.invoke(app, ["config", "keys", "sensor"])
     assert "Nikon 5100 (NPL)/green" in r.stdout
+
+
+def test_looking_up_a_name_keeps_numpys_print_options() -> None:
+    """colour-science's import sets numpy's print options to 1.13's (``str`` of a float64 to 12
+    digits) for the whole process; bench_sim keeps them as they were (a fresh process)."""
+    import subprocess
+    import sys
+
+    code = ("import numpy as np; from bench_sim.io.spectral_data import named_spectrum; "
+            "named_spectrum('light', 'A'); print(np.get_printoptions()['legacy'], str(np.float64(1 / 3)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "0.3333333333333333"]

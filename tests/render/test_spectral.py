@@ -79,13 +79,21 @@ def _measured_cfg(engine_spp: int, lamp: str = LAMP, patch: str = "/".join(PATCH
     )
 
 
+def _colour():
+    """colour-science, numpy's print options kept (its import sets numpy 1.13's for the process)."""
+    options = np.get_printoptions()
+    import colour
+
+    np.set_printoptions(**options)
+    return colour
+
+
 def _independent_ratio() -> float:
     """QE-equivalent photons per mono photon of a grey print of reflectance 1, by numpy on a
     0.5-nm grid over 400..700 nm from colour-science's own tables: the lamp's spectrum times the
     patch's reflectance times the response QE(lambda)/QE(550 nm) lambda/550 nm, over the lamp's
     in-band integral."""
-    import colour
-
+    colour = _colour()
     wl = np.arange(400.0, 700.25, 0.5)
     lamp = colour.SDS_ILLUMINANTS[LAMP]
     patch = colour.SDS_COLOURCHECKERS[PATCH[0]][PATCH[1]]
@@ -113,9 +121,7 @@ def test_measured_lamp_patch_and_qe_give_the_integrated_photons(engine):
 
 def test_a_lamp_from_csv_is_the_named_one(tmp_path):
     """The same lamp given as a CSV file (its table written out) gives the same photons."""
-    import colour
-
-    lamp = colour.SDS_ILLUMINANTS[LAMP]
+    lamp = _colour().SDS_ILLUMINANTS[LAMP]
     (tmp_path / "lamp.csv").write_text("wavelength_nm,power\n" + "\n".join(
         f"{w:g},{v:.9g}" for w, v in zip(lamp.wavelengths, lamp.values, strict=True)))
     named, _ = render_photons(_measured_cfg(16), 2, np.random.default_rng(0), engine="fast")
