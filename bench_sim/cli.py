@@ -43,9 +43,8 @@ from bench_sim.render import record_store
 from bench_sim.runtime.backend import choose_backend, versions
 from bench_sim.runtime.resources import available_memory_bytes
 from bench_sim.workflows import calibrate as calibrate_workflow
-from bench_sim.workflows import config_cmd, ptc_job, render_job, simulate_summary
+from bench_sim.workflows import config_cmd, mtf_cmd, ptc_job, render_job, simulate_summary
 from bench_sim.workflows import fuse as fuse_workflow
-from bench_sim.workflows import mtf as mtf_workflow
 from bench_sim.workflows import simulate as simulate_workflow
 from bench_sim.workflows.dataset import run as dataset_run
 from bench_sim.workflows.reproduce import run as reproduce_run
@@ -356,27 +355,6 @@ def fuse(
 
 
 @app.command()
-def mtf(
-    image: Annotated[Path, typer.Argument(help="image with a slanted edge (TIFF/PNG, EXR or NPY), linear")],
-    roi: Annotated[
-        str | None, typer.Option("--roi", help="x0,y0,x1,y1: the edge's region [px, ends exclusive]; "
-                                 "default: the whole image")
-    ] = None,
-    pixel_pitch_um: Annotated[
-        float | None, typer.Option("--pixel-pitch-um", help="pixel pitch [um], for cycles/mm")
-    ] = None,
-    saturation: Annotated[
-        float | None, typer.Option("--saturation", help="value at which the camera clips (default: a "
-                                   "full 8..16-bit word when the ROI reaches one)")
-    ] = None,
-    out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/mtf"),
-) -> None:
-    """ISO 12233 slanted-edge SFR of an image: sfr.csv, sfr.png and summary.json in DIR."""
-    s = mtf_workflow.run_mtf(image, out=out, roi=roi, pixel_pitch_um=pixel_pitch_um, saturation=saturation)
-    print(mtf_workflow.summary_line(s, out))
-
-
-@app.command()
 def reproduce(
     config: ConfigArg = DEFAULT_CONFIG_PATH,
     seed: SeedOpt = 0,
@@ -487,6 +465,7 @@ def calibrate(
 # ``bench-sim config keys|show`` and ``bench-sim init`` (their arguments live with the workflow)
 app.add_typer(config_cmd.config_app, name="config")
 app.command("init")(config_cmd.init_command)
+app.command("mtf")(mtf_cmd.mtf_command)
 
 
 def main() -> None:  # pragma: no cover

@@ -22,8 +22,8 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, load_config, warn_config, with_overrides
 from bench_sim.errors import BenchSimError
-from bench_sim.io import output_set, write_json
-from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges, sharpness_summary
+from bench_sim.io import output_set, write_csv, write_json
+from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges, sharpness_curves, sharpness_summary
 from bench_sim.pipeline import (
     IMAGE_DIMS,
     PASS_VARIABLES,
@@ -153,6 +153,8 @@ def check_inputs(
 
 #: ``--format`` values and the file each writes into ``--out``
 FORMATS = {"zarr": "simulation.zarr", "netcdf": "simulation.nc", "tiff": "meta.json"}
+#: the TIFF set's table of the mean e-SFR curves per stage (a slanted-edge target)
+SFR_CURVES_FILE = "sfr_curves.csv"
 
 
 def parse_stages_arg(text: str, rows: int) -> tuple[int, ...]:
@@ -194,7 +196,9 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
     ``stage_MMM_VARIABLE.tiff`` (integer and boolean variables uint32, the others float32), ``gamma_hdr.tiff``
     and ``gamma_hdr_source.tiff`` when fused, each with its units and the provenance as JSON in the
     ImageDescription tag, plus ``meta.json`` (provenance, units, file list and, with slanted
-    edges, the MTF50s of :func:`bench_sim.measure.sharpness.sharpness_summary`).
+    edges, the MTF50s of :func:`bench_sim.measure.sharpness.sharpness_summary`) and, with slanted
+    edges, ``sfr_curves.csv`` (the mean e-SFR curve of every stage and direction,
+    :func:`bench_sim.measure.sharpness.sharpness_curves`).
     """
     if fmt in ("zarr", "netcdf"):
         ds = stored_dataset(ds, int(ds.attrs["beta_bits"]))
@@ -227,8 +231,13 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
         if var.name in ds:
             put(f"{var.name}.tiff", ds[var.name].values, var, None)
     sharp = sharpness_summary(ds)  # the MTF50s of a slanted-edge target (none otherwise)
+    curves = sharpness_curves(ds)
+    if curves:  # and their mean e-SFR curves
+        write_csv(folder / SFR_CURVES_FILE, ["stage", "direction", "frequency_cyc_px", "sfr"], curves,
+                  {**meta, "directions": "along the track: near-horizontal edges (cycles/line); across: "
+                   "near-vertical edges (cycles/column); frequencies along the edge normal"})
     write_json(folder / "meta.json", {**meta, "files": files, "dims": ["line", "column"], **sharp})
-    return [*files, "meta.json"]
+    return [*files, *([SFR_CURVES_FILE] if curves else []), "meta.json"]
 
 
 def run_simulate(

@@ -174,7 +174,15 @@ def test_a_target_that_is_not_drawn_shares_its_rasterised_blocks_between_passes(
                             np.random.default_rng(1))
     assert b._blocks is a._blocks and b.held_bytes == a.held_bytes > 0
     np.testing.assert_array_equal(b.rows(0, b.n_rows), rows)
-    np.testing.assert_array_equal(b._rasterize(0, b.n_rows), rows)
+    # a fresh rasterisation, blurred by the lens block by block (diffraction: the default)
+    assert b.lens is not None
+    fresh = np.concatenate([b._made_block(k) for k in range(-(-b.n_rows // texture.BLOCK_ROWS))])
+    np.testing.assert_array_equal(fresh, rows)
+    np.testing.assert_array_equal(b.values, rows)
+    perfect = tiny_cfg(lens={"diffraction": False})
+    e = texture.run_texture(perfect, geom, FIRST, 8, np.random.default_rng(0))
+    assert e.lens is None and e._blocks is not a._blocks
+    np.testing.assert_array_equal(e.rows(0, e.n_rows), e._rasterize(0, e.n_rows))
     leaves = tiny_cfg(target={"layout": "dead_leaves"})
     c = texture.run_texture(leaves, geom, FIRST, 8, np.random.default_rng(0))
     d = texture.run_texture(leaves, geom, FIRST, 8, np.random.default_rng(0))

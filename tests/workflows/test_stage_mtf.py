@@ -11,8 +11,11 @@ import pytest
 
 from bench_sim.config import with_overrides
 from bench_sim.io import read_png_text
+from bench_sim.workflows.reproduce.result import SharpnessResult
+from bench_sim.workflows.reproduce.sharpness_report import sharpness_section
 from bench_sim.workflows.reproduce.stage_mtf import (
     COMPANION_LINES,
+    COMPANION_TEXELS_PER_PIXEL,
     companion_config,
     measure_stage_mtf,
     write_stage_mtf,
@@ -69,3 +72,31 @@ def test_mtf50_vs_stage_is_noise_free() -> None:
         v = ds[f"mtf50_{d}"].values
         np.testing.assert_allclose(v, v[0], rtol=1e-5, err_msg=d)
     assert np.array_equal(ds["dn"].values, ds["mean_dn"].values)
+
+
+def test_companion_draws_finer_edges_through_a_lens() -> None:
+    """Through a lens that blurs (diffraction, the default) the companion's target has 8 texels per
+    pixel; a perfect lens keeps the bench's (the numbers of bench_sim 0.3)."""
+    assert companion_config(_bench()).target.texels_per_pixel == COMPANION_TEXELS_PER_PIXEL == 8
+    perfect = make_cfg(lens={"diffraction": False})
+    assert companion_config(perfect).target.texels_per_pixel == perfect.target.texels_per_pixel == 4
+
+
+def _sharpness(measured: float | None, warning: str | None = None) -> SharpnessResult:
+    return SharpnessResult(
+        lens="diffraction: N_w = 4.444 at 550 nm", sharpness_stages=[1, 10], mtf50_across_cyc_px=0.45,
+        mtf50_along_cyc_px=0.36, mtf_nyquist_across=measured, mtf_nyquist_along=0.28,
+        closed_nyquist_across=0.458, closed_nyquist_across_binned=0.447, closed_mtf50_across_cyc_px=0.467,
+        nyquist_warning=warning,
+    )
+
+
+def test_sharpness_section_says_what_was_measured() -> None:
+    """The report's sharpness section: the measurement matches the closed form only within 3 %,
+    the deviation signed; the Nyquist warning when there is one."""
+    close = "\n".join(sharpness_section(_sharpness(0.440)))
+    assert "which the measurement matches (-1.6 %)" in close and "Warning" not in close
+    assert "| SFR at Nyquist (0.5 cycles/px) | 0.440 | 0.280 |" in close
+    far = "\n".join(sharpness_section(_sharpness(0.480, "the system MTF50 ... above Nyquist")))
+    assert "from which the measurement differs (+7.4 %)" in far and "**Warning:** the system MTF50" in far
+    assert "could not measure" in "\n".join(sharpness_section(_sharpness(None)))

@@ -17,7 +17,8 @@ from bench_sim.config import BenchConfig
 from bench_sim.io import atomic_path, markdown_table, write_text
 from bench_sim.workflows.reproduce.result import PAPER, ReproduceResult
 from bench_sim.workflows.reproduce.seeds import spread_section
-from bench_sim.workflows.reproduce.stage_mtf import sharpness_section
+from bench_sim.workflows.reproduce.sharpness_report import SHARPNESS_HEADING, sharpness_section
+from bench_sim.workflows.reproduce.stage_mtf import mtf50_vs_stage_section
 from bench_sim.workflows.reproduce.truth_report import clipped_source_sentence, truth_section
 from bench_sim.workflows.reproduce.wording import (
     SPATIAL,
@@ -437,7 +438,8 @@ def report_markdown(r: ReproduceResult, cfg: BenchConfig, quick: bool) -> str:
         *_fig4_section(r, cfg.fusion.tra),
         *_table1_section(r),
         *(truth_section(r.truth.fusion_truth, r.shape.mu1, r.shape.mu2) if r.truth is not None else []),
-        *sharpness_section(cfg),
+        *(sharpness_section(r.sharpness) if r.sharpness is not None else [SHARPNESS_HEADING, ""]),
+        *mtf50_vs_stage_section(cfg),
         *(spread_section(r.seeds.spread, r.seeds.seeds) if r.seeds is not None else []),
         *_inconsistencies(r),
         *_timings_section(r),

@@ -78,7 +78,7 @@ from bench_sim.workflows.reproduce.result import (
     TruthResult,
 )
 from bench_sim.workflows.reproduce.seeds import headline_numbers, seed_spread
-from bench_sim.workflows.reproduce.stage_mtf import measure_stage_mtf, write_stage_mtf
+from bench_sim.workflows.reproduce.stage_mtf import measure_stage_mtf, sharpness_result, write_stage_mtf
 from bench_sim.workflows.reproduce.truth_figures import write_truth_figures
 from bench_sim.workflows.reproduce.writing import snr_figure, start_image_files
 
@@ -407,6 +407,7 @@ def _outputs(
     write_table1(tmp / "table1.csv", result)
     files_written()
     lane.join()
+    result = replace(result, sharpness=sharpness_result(beside.stage_mtf(), cfg))
     timer.add("write", time.perf_counter() - t0)
     return result
 
