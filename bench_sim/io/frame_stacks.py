@@ -55,7 +55,7 @@ FRAME_ARRAYS = {
 
 
 def write_frames_npz(
-    path: str | os.PathLike[str], arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any] | None = None
+    path: str | os.PathLike[str], arrays: Mapping[str, Any], metadata: Mapping[str, Any] | None = None
 ) -> Path:
     """Write a frames file (module docstring), atomically; ``metadata`` as its JSON string."""
     unknown = set(arrays) - set(FRAME_ARRAYS)

@@ -77,7 +77,7 @@ class DefectImages:
     ``dark_level_dn`` (the dark image of the shortest exposure [DN]), ``response`` (the PRNU
     image: dark-subtracted flat over its median, or None), ``dark_var_dn2`` (pooled dark temporal
     variance) with ``dark_var_dof``, ``constant`` (no temporal noise in any image and the same
-    value dark and lit), ``clip_dn`` and ``shortest_exposure_s``."""
+    value dark and lit), ``clip_dn`` (M, N: each pixel's clip) and ``shortest_exposure_s``."""
 
     dark_rate_dn_s: np.ndarray
     dark_level_dn: np.ndarray
@@ -85,7 +85,7 @@ class DefectImages:
     dark_var_dn2: np.ndarray | None
     dark_var_dof: int
     constant: np.ndarray
-    clip_dn: float
+    clip_dn: np.ndarray
     shortest_exposure_s: float
 
 

@@ -150,15 +150,17 @@ def _dark_fit(tab: PtcTable, k: float) -> tuple[float, float, float, float, floa
     t, m, v = tab.dark_exposure_s, tab.dark_means_dn, tab.dark_vars_dn2
     absolute = tab.pixels is not None
     n = float(tab.pixels or 1)
-    rel = math.sqrt(2.0 / (n * max(tab.dark_images - 1, 1)))
+    rel = tab.var_rel_se(v, tab.dark_images)
     if t.size >= 3:
         sv = wls_line(t, v, np.maximum(v, 1e-12) * rel, through_origin=False, absolute_sigma=absolute)
-        sm = np.sqrt(np.maximum(v, 1e-12) / (tab.dark_images * n))
+        sm = np.sqrt(
+            (np.maximum(v, 1e-12) + (tab.columns - 1) * tab.row_noise_var_dn2) / (tab.dark_images * n)
+        )
         fm = wls_line(t, m, sm, through_origin=False, absolute_sigma=absolute)
         return sv.intercept, sv.intercept_se, fm.intercept, fm.slope / k, fm.slope_se / k, sv.slope / k**2
     var = float(v.mean())
     spread = float(np.std(v, ddof=1)) if v.size > 1 and not absolute else 0.0
-    se = max(var * rel, spread) / math.sqrt(v.size)
+    se = max(var * float(rel.mean()), spread) / math.sqrt(v.size)
     return var, se, float(m.mean()), math.nan, math.nan, math.nan
 
 
@@ -194,26 +196,17 @@ def clip_kind(tab: PtcTable, i_sat: int) -> tuple[str, float, float]:
     return kind, pvar, top
 
 
-def _groups(tab: PtcTable) -> np.ndarray:
-    """Index of the dark level every lit row subtracts (rows sharing one get one index)."""
-    keys = np.column_stack([tab.exposure_s, tab.dark_var_dn2, tab.dark_mean_dn])
-    _, inverse = np.unique(keys, axis=0, return_inverse=True)
-    return np.asarray(inverse).ravel()
-
-
 def _k_fit(tab: PtcTable, lin: np.ndarray, s: np.ndarray, ratio: np.ndarray) -> LineFit:
     """``K`` through the origin of the dark-subtracted variance (divided by ``ratio^2``, the
     response's slope) against the (linear) signal ``s``, by generalised least squares: each
     variance's own error on the diagonal, each dark level's error shared by every point that
     subtracts it."""
-    n = float(tab.pixels or 1)
-    rel = math.sqrt(2.0 / (n * max(tab.images - 1, 1)))
-    rel_d = math.sqrt(2.0 / (n * max(tab.dark_images - 1, 1)))
     d2 = ratio[lin] ** 2
-    y = (tab.var_dn2[lin] - tab.dark_var_dn2[lin]) / d2
-    own = (tab.var_dn2[lin] * rel / d2) ** 2
-    shared = tab.dark_var_dn2[lin] * rel_d / d2
-    grp = _groups(tab)[lin]
+    var, dvar = tab.var_dn2[lin], tab.dark_var_dn2[lin]
+    y = (var - dvar) / d2
+    own = (var * tab.var_rel_se(var, tab.images) / d2) ** 2
+    shared = dvar * tab.var_rel_se(dvar, tab.dark_images) / d2
+    grp = tab.dark_groups()[lin]
     cov = np.diag(own) + np.where(grp[:, None] == grp[None, :], np.outer(shared, shared), 0.0)
     return gls_through_origin(s[lin], y, cov, absolute_sigma=tab.pixels is not None)
 
@@ -226,8 +219,9 @@ def _response(tab: PtcTable, i_sat: int) -> tuple[ResponseFit | None, LinearityE
     rng = (sig > 0) & (sig <= LE_RANGE[1] * sig[i_sat]) & (np.arange(sig.size) <= i_sat) & (x > 0)
     if int(rng.sum()) < 3:
         return None, None
-    se = tab.signal_se_dn()
-    resp = fit_response(x[rng], sig[rng], se[rng], absolute=tab.pixels is not None)
+    cov = tab.signal_cov_dn2()
+    se = np.sqrt(np.diag(cov))
+    resp = fit_response(x[rng], sig[rng], cov[np.ix_(rng, rng)], absolute=tab.pixels is not None)
     try:
         le = linearity_error(
             x, sig, tab.var_dn2, signal_se_dn=se if tab.pixels else None, saturation_index=i_sat
@@ -247,13 +241,9 @@ def _responsivity(
         return math.nan, math.nan, math.nan, None
     if linearized and resp is not None:
         return resp.slope, resp.slope_se, resp.chi2_red, None
-    s_mean = tab.signal_se_dn()[lin]
-    rf = wls_line(
-        tab.irradiance[lin],
-        tab.signal_dn[lin],
-        s_mean,
-        through_origin=True,
-        absolute_sigma=tab.pixels is not None,
+    cov = tab.signal_cov_dn2()[np.ix_(lin, lin)]
+    rf = gls_through_origin(
+        tab.irradiance[lin], tab.signal_dn[lin], cov, absolute_sigma=tab.pixels is not None
     )
     return rf.slope, rf.slope_se, rf.chi2_red, rf
 

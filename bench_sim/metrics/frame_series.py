@@ -38,6 +38,7 @@ from bench_sim.metrics.emva_fit import CameraFit, fit_camera
 from bench_sim.metrics.nonuniformity import (
     RowNoise,
     dark_series_maps,
+    own_temporal_var,
     row_noise_variance,
     spatial_components,
     temporal_mean_var,
@@ -139,8 +140,9 @@ def _darks(series: FrameSeries) -> _Dark:
     return _Dark(np.asarray(ts), [np.concatenate(by_t[t]) for t in ts])
 
 
-def _table(series: FrameSeries, dark: _Dark, mask: np.ndarray) -> PtcTable:
-    """The photon-transfer table of the pixels of ``mask``: every lit level and dark stack."""
+def _table(series: FrameSeries, dark: _Dark, mask: np.ndarray, row_var: float = 0.0) -> PtcTable:
+    """The photon-transfer table of the pixels of ``mask``: every lit level and dark stack (a row
+    noise ``row_var`` [DN^2] widens its errors)."""
     rows: list[tuple[float, float, float, float, bool]] = []
     for t, st in zip(dark.exposure_s, dark.stacks, strict=True):
         mean, var, _ = temporal_mean_var(st, mask)
@@ -166,6 +168,8 @@ def _table(series: FrameSeries, dark: _Dark, mask: np.ndarray) -> PtcTable:
         wavelength_nm=series.wavelength_nm,
         images=min(lv.images.shape[0] for lv in series.lit),
         dark_images=min(s.shape[0] for s in dark.stacks),
+        row_noise_var_dn2=row_var,
+        columns=int(np.ceil(mask.sum() / max(int(np.any(mask, axis=1).sum()), 1))),
         source=series.source,
         **irr,
     )
@@ -182,13 +186,21 @@ def _constant(series: FrameSeries, dark: _Dark) -> np.ndarray:
     return np.asarray(lo == hi)
 
 
-def _clip(series: FrameSeries) -> float:
-    top = (
-        (1 << series.bits) - 1
-        if series.bits is not None
-        else max(float(lv.images.max()) for lv in series.lit)
-    )
-    return float(top) - 0.5
+#: Fraction of its own range (dark to plateau) below which a pixel's dark value is unclipped
+CLIP_FRACTION = 0.9
+
+
+def _clip_map(series: FrameSeries, dark0: np.ndarray) -> np.ndarray:
+    """(M, N) value [DN] above which a pixel's dark value counts as clipped:
+    :data:`CLIP_FRACTION` of its own range, from its dark level to its plateau (its largest mean
+    over the lit levels: its full well or the ADC's top); a pixel that barely responds (a dead
+    one) takes the population's range."""
+    top = (1 << series.bits) - 1 if series.bits is not None else np.inf
+    plateau = np.max(np.stack([lv.images.mean(axis=0, dtype=np.float64) for lv in series.lit]), axis=0)
+    span = plateau - dark0
+    typical = float(np.median(span))
+    span = np.where(span < 0.5 * typical, typical, span)
+    return np.minimum(dark0 + CLIP_FRACTION * span, top - 0.5)
 
 
 def _level_near(tab: PtcTable, fit: CameraFit, fraction: float) -> int:
@@ -197,8 +209,8 @@ def _level_near(tab: PtcTable, fit: CameraFit, fraction: float) -> int:
 
 
 def _defect_images(series: FrameSeries, dark: _Dark, tab: PtcTable, fit: CameraFit) -> DefectImages:
-    clip = _clip(series)
     means = np.stack([st.mean(axis=0, dtype=np.float64) for st in dark.stacks])
+    clip = _clip_map(series, means[0])
     if dark.exposure_s.size >= 2:
         var_j = [temporal_mean_var(st)[1] for st in dark.stacks]
         maps = dark_series_maps(dark.exposure_s, means, var_j, [s.shape[0] for s in dark.stacks], clip)
@@ -224,9 +236,10 @@ def _defect_images(series: FrameSeries, dark: _Dark, tab: PtcTable, fit: CameraF
 
 
 def _spatial(
-    series: FrameSeries, dark: _Dark, tab: PtcTable, fit: CameraFit, good: np.ndarray
+    series: FrameSeries, dark: _Dark, tab: PtcTable, fit: CameraFit, good: np.ndarray, row_var: float
 ) -> dict[str, Any]:
-    """DSNU at the exposure of the 50 % level [e-] and PRNU (fraction), with their components."""
+    """DSNU at the exposure of the 50 % level [e-] and PRNU (fraction), with their components
+    (the row noise's share of the temporal residue taken off the row part)."""
     k = fit.k_dn_per_e
     i50 = _level_near(tab, fit, 0.5)
     lv = series.lit[i50]
@@ -235,9 +248,12 @@ def _spatial(
     d_mean = dst.mean(axis=0, dtype=np.float64)
     _, d_var, _ = temporal_mean_var(dst, good)
     _, f_var, _ = temporal_mean_var(lv.images, good)
-    dsnu = spatial_components(np.where(good, d_mean, np.nan), d_var / dst.shape[0])
+    ld, lf = dst.shape[0], lv.images.shape[0]
+    own_d = own_temporal_var(dst, good)
+    dsnu = spatial_components(np.where(good, d_mean, np.nan), own_d / ld, row_var / ld)
     flat = lv.images.mean(axis=0, dtype=np.float64) - d_mean
-    prnu = spatial_components(np.where(good, flat, np.nan), f_var / lv.images.shape[0] + d_var / dst.shape[0])
+    own = own_temporal_var(lv.images, good) / lf + own_d / ld
+    prnu = spatial_components(np.where(good, flat, np.nan), own, row_var / lf + row_var / ld)
     signal = float(np.mean(flat[good]))
     return {
         "exposure_s": float(dark.exposure_s[j]),
@@ -247,17 +263,25 @@ def _spatial(
     }
 
 
-def _dsnu_split(dark: _Dark, fit: CameraFit, good: np.ndarray, clip: float) -> dict[str, Any] | None:
+def _dsnu_split(
+    series: FrameSeries, dark: _Dark, fit: CameraFit, good: np.ndarray, row_var: float
+) -> dict[str, Any] | None:
     """The offset pattern at 0 s [e-] and the dark current's non-uniformity [e-/s]."""
     if dark.exposure_s.size < 3:
         return None
     k = fit.k_dn_per_e
     means = np.stack([st.mean(axis=0, dtype=np.float64) for st in dark.stacks])
-    var_j = [temporal_mean_var(st, good)[1] for st in dark.stacks]
-    maps = dark_series_maps(dark.exposure_s, means, var_j, [s.shape[0] for s in dark.stacks], clip)
+    var_j = [own_temporal_var(st, good) for st in dark.stacks]
+    images = [s.shape[0] for s in dark.stacks]
+    maps = dark_series_maps(dark.exposure_s, means, var_j, images, _clip_map(series, means[0]))
+    rows = dark_series_maps(dark.exposure_s, means, [row_var] * len(images), images, np.inf)
     full = good & (maps.exposures_used == dark.exposure_s.size)
-    off = spatial_components(np.where(full, maps.offset_dn, np.nan), maps.offset_noise_dn2)
-    rate = spatial_components(np.where(full, maps.slope_dn_s, np.nan), maps.slope_noise_dn2_s2)
+    off = spatial_components(
+        np.where(full, maps.offset_dn, np.nan), maps.offset_noise_dn2, rows.offset_noise_dn2
+    )
+    rate = spatial_components(
+        np.where(full, maps.slope_dn_s, np.nan), maps.slope_noise_dn2_s2, rows.slope_noise_dn2_s2
+    )
     return {
         "exposures_s": dark.exposure_s.tolist(),
         "dsnu0_e": off.summary(1.0 / k, "_e"),
@@ -290,15 +314,17 @@ def analyse_frames(
     good = defects.good
     if int(good.sum()) < 4:
         raise BenchSimError(f"{series.source}: fewer than 4 pixels are not defects")
-    tab = _table(series, dark, good)
-    fit = fit_camera(tab)
     stacks: Sequence[np.ndarray] = dark.stacks
+    rn = row_noise_variance(stacks, good)
+    row_var = max(rn.var_dn2, 0.0)
+    tab = _table(series, dark, good, row_var)
+    fit = fit_camera(tab)
     return FrameAnalysis(
         table=tab,
         fit=fit,
         defects=defects,
-        spatial=_spatial(series, dark, tab, fit, good),
-        dsnu_split=_dsnu_split(dark, fit, good, _clip(series)),
-        row_noise=row_noise_variance(stacks, good),
+        spatial=_spatial(series, dark, tab, fit, good, row_var),
+        dsnu_split=_dsnu_split(series, dark, fit, good, row_var),
+        row_noise=rn,
         good_pixels=int(good.sum()),
     )

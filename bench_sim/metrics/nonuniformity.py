@@ -12,6 +12,10 @@ its column means ``c``, row means ``r`` and the residual ``e = Y - c - r + mean`
 * column part: ``s_col^2 = var(c) - (s_pix^2 + v) / M``; row part likewise with ``N``;
 * total: their sum.
 
+A temporal noise common to a row (row noise, variance ``v_row`` in the map) is in the row means
+whole and taken off the row part; it shifts every column mean alike (not in their spread) and is
+not in the pixel part.
+
 Each has the standard error of a variance of that many independent values,
 ``sqrt(2 / dof)`` times the raw variance; an rms ``s`` has ``se(s^2) / (2 s)``.
 
@@ -55,6 +59,7 @@ __all__ = [
     "RowNoise",
     "row_noise_variance",
     "temporal_mean_var",
+    "own_temporal_var",
 ]
 
 
@@ -71,6 +76,18 @@ def temporal_mean_var(stack: np.ndarray, mask: np.ndarray | None = None) -> tupl
     var_px = centred.var(axis=0, ddof=1)
     var_map[keep] = var_px
     return float(sel.mean()), float(var_px.mean()), var_map
+
+
+def own_temporal_var(stack: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """The pixels' own temporal variance [DN^2] of ``L >= 2`` images, without what a row shares
+    (row noise): each image less its rows' means, the variance over the images (``ddof = 1``)
+    averaged over the pixels of ``mask``, times ``N / (N - 1)`` for the row mean taken off."""
+    y = np.asarray(stack, dtype=np.float64)
+    keep = np.ones(y.shape[1:], dtype=bool) if mask is None else mask
+    yy = np.where(keep[None], y, np.nan)
+    n = float(np.mean(keep.sum(axis=1)))
+    resid = yy - np.nanmean(yy, axis=2, keepdims=True)
+    return float(np.nanmean(np.nanvar(resid, axis=0, ddof=1))) * n / max(n - 1.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -103,7 +120,7 @@ class SpatialComponents:
         return out
 
 
-def spatial_components(image: np.ndarray, noise_var: float) -> SpatialComponents:
+def spatial_components(image: np.ndarray, noise_var: float, row_noise_var: float = 0.0) -> SpatialComponents:
     """The column, row and pixel parts of a map's spatial variance (module docstring).
 
     Parameters
@@ -111,7 +128,11 @@ def spatial_components(image: np.ndarray, noise_var: float) -> SpatialComponents
     image
         (M, N) average map; NaN marks pixels left out (defects).
     noise_var
-        Residual temporal variance of each value of the map [unit^2].
+        Residual temporal variance of each value of the map, the pixel's own [unit^2].
+    row_noise_var
+        Residual temporal variance the values of a row share (row noise) [unit^2]: it is in the
+        row means whole; a column mean holds the average of the rows' shares, the same for every
+        column, so not in their spread.
     """
     y = np.asarray(image, dtype=np.float64)
     if y.ndim != 2 or min(y.shape) < 2:
@@ -127,7 +148,7 @@ def spatial_components(image: np.ndarray, noise_var: float) -> SpatialComponents
     pixel = raw_pix - noise_var
     var_c, var_r = float(np.var(col, ddof=1)), float(np.var(row, ddof=1))
     column = var_c - raw_pix / (m * frac)
-    row_v = var_r - raw_pix / (n * frac)
+    row_v = var_r - raw_pix / (n * frac) - row_noise_var
     se_pix = raw_pix * math.sqrt(2.0 / dof_pix)
     se_col = var_c * math.sqrt(2.0 / (n - 1))
     se_row = var_r * math.sqrt(2.0 / (m - 1))
@@ -163,7 +184,7 @@ def dark_series_maps(
     mean_maps: np.ndarray,
     temporal_var_dn2: Sequence[float],
     images: Sequence[int],
-    clip_dn: float,
+    clip_dn: float | np.ndarray,
 ) -> DarkSeriesMaps:
     """The per-pixel dark lines of a dark series (module docstring).
 
@@ -178,7 +199,8 @@ def dark_series_maps(
     images
         (J,) images behind each mean map.
     clip_dn
-        Values at or above this are clipped (left out of a pixel's line).
+        Values at or above this [DN] are clipped (left out of a pixel's line): a number, or an
+        (M, N) map of each pixel's own clip.
     """
     t = np.asarray(exposure_s, dtype=np.float64)
     y = np.asarray(mean_maps, dtype=np.float64)

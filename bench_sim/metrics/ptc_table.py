@@ -47,7 +47,9 @@ class PtcTable:
     behind each mean and variance (2: an EMVA 1288 pair); ``bits``: ADC bits (None: unknown);
     ``wavelength_nm`` (None: unknown); ``dark_mean_known``: False when the table gave the signal
     only (its ``dark_mean_dn`` are then 0); ``irradiance_kind``: ``photons``,
-    ``relative_irradiance``, ``exposure`` or ``none``.
+    ``relative_irradiance``, ``exposure`` or ``none``; ``row_noise_var_dn2`` and ``columns``: a
+    temporal row noise the ``columns`` pixels of a row share (its errors widen those of the means
+    and variances, :meth:`var_rel_se`).
     """
 
     exposure_s: np.ndarray
@@ -68,18 +70,47 @@ class PtcTable:
     dark_images: int = 2
     dark_mean_known: bool = True
     irradiance_kind: str = "photons"
+    row_noise_var_dn2: float = 0.0
+    columns: int = 1
 
     @property
     def signal_dn(self) -> np.ndarray:
         """``mu_y - mu_y.dark`` [DN] of every lit level."""
         return self.mean_dn - self.dark_mean_dn
 
-    def signal_se_dn(self) -> np.ndarray:
-        """Standard error of every signal [DN]: the temporal noise of the two means (relative
-        units when ``pixels`` is unknown)."""
+    def _shared(self, var: np.ndarray) -> np.ndarray:
+        """``1 + (N_c - 1) (b / var)^2``: how much a row noise ``b`` shared by the ``N_c`` pixels of a
+        row widens the error of a variance over the pixels (1 without row noise)."""
+        b = self.row_noise_var_dn2
+        return 1.0 + (self.columns - 1) * (b / np.maximum(var, 1e-300)) ** 2
+
+    def var_rel_se(self, var: np.ndarray, images: int) -> np.ndarray:
+        """Relative standard error of a temporal variance ``var`` from ``images`` images of the
+        ``pixels``: ``sqrt(2 / (N (L - 1)))`` for independent pixels, widened by the row noise
+        they share (:attr:`row_noise_var_dn2`, :attr:`columns`)."""
         n = float(self.pixels or 1)
-        var = np.maximum(self.var_dn2, 1e-12) / (n * self.images)
-        return np.sqrt(var + np.maximum(self.dark_var_dn2, 0.0) / (n * self.dark_images))
+        return np.sqrt(2.0 / (n * max(images - 1, 1)) * self._shared(np.asarray(var, dtype=np.float64)))
+
+    def dark_groups(self) -> np.ndarray:
+        """Index of the dark level every lit level subtracts (levels sharing one get one index)."""
+        keys = np.column_stack([self.exposure_s, self.dark_var_dn2, self.dark_mean_dn])
+        _, inverse = np.unique(keys, axis=0, return_inverse=True)
+        return np.asarray(inverse).ravel()
+
+    def signal_cov_dn2(self) -> np.ndarray:
+        """Covariance [DN^2] of the signals ``mu_y - mu_y.dark``: each lit mean's temporal noise
+        on the diagonal (relative units when ``pixels`` is unknown; a row noise adds ``b / M`` per
+        image), each dark mean's shared by the levels that subtract it."""
+        n = float(self.pixels or 1)
+        shared = (self.columns - 1) * self.row_noise_var_dn2
+        own = (np.maximum(self.var_dn2, 1e-12) + shared) / (n * self.images)
+        dark = (np.maximum(self.dark_var_dn2, 0.0) + shared) / (n * self.dark_images)
+        grp = self.dark_groups()
+        return np.diag(own) + np.where(grp[:, None] == grp[None, :], np.sqrt(np.outer(dark, dark)), 0.0)
+
+    def signal_se_dn(self) -> np.ndarray:
+        """Standard error of every signal [DN] (the diagonal of :meth:`signal_cov_dn2`)."""
+        return np.sqrt(np.diag(self.signal_cov_dn2()))
 
 
 def _col(name: str, values: Any, n: int, source: str) -> np.ndarray:
@@ -191,6 +222,8 @@ def make_table(
     wavelength_nm: float | None = None,
     images: int = 2,
     dark_images: int = 2,
+    row_noise_var_dn2: float = 0.0,
+    columns: int = 1,
     source: str = "table",
 ) -> PtcTable:
     """Check a photon-transfer table and pair every lit level with its dark level (module doc).
@@ -258,4 +291,6 @@ def make_table(
         dark_images=int(dark_images),
         dark_mean_known=mean_known,
         irradiance_kind=kind,
+        row_noise_var_dn2=float(max(row_noise_var_dn2, 0.0)),
+        columns=int(columns),
     )

@@ -90,16 +90,21 @@ class ResponseFit:
         return np.maximum.accumulate(np.asarray(y, dtype=np.float64).ravel()).reshape(x.shape) / k_dn_per_e
 
 
-def _wls(x: np.ndarray, y: np.ndarray, s: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Weighted polynomial through the origin: coefficients, their covariance (absolute) and chi2."""
+def _wls(x: np.ndarray, y: np.ndarray, chol: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Generalised least-squares polynomial through the origin (the points' covariance given by
+    its Cholesky factor): coefficients, their covariance (absolute) and chi2."""
+    from scipy.linalg import solve_triangular
+
     scale = float(np.max(np.abs(x)))
     u = x / scale
-    design = np.column_stack([u ** (k + 1) for k in range(degree)]) / s[:, None]
-    coef, *_ = np.linalg.lstsq(design, y / s, rcond=None)
-    res = y - (design * s[:, None]) @ coef
-    cov = np.linalg.pinv(design.T @ design)
+    design = np.column_stack([u ** (k + 1) for k in range(degree)])
+    wd = solve_triangular(chol, design, lower=True)
+    wy = solve_triangular(chol, y, lower=True)
+    coef, *_ = np.linalg.lstsq(wd, wy, rcond=None)
+    res = wy - wd @ coef
+    cov = np.linalg.pinv(wd.T @ wd)
     powers = scale ** np.arange(1, degree + 1)
-    return coef / powers, cov / np.outer(powers, powers), float(np.sum((res / s) ** 2))
+    return coef / powers, cov / np.outer(powers, powers), float(np.sum(res**2))
 
 
 def _rms(x: np.ndarray, y: np.ndarray, coef: np.ndarray) -> float:
@@ -109,7 +114,7 @@ def _rms(x: np.ndarray, y: np.ndarray, coef: np.ndarray) -> float:
 
 
 def fit_response(
-    x: np.ndarray, y: np.ndarray, sigma: np.ndarray, *, absolute: bool, max_degree: int = MAX_DEGREE
+    x: np.ndarray, y: np.ndarray, cov: np.ndarray, *, absolute: bool, max_degree: int = MAX_DEGREE
 ) -> ResponseFit:
     """The response polynomial (module docstring) over the levels given.
 
@@ -119,17 +124,20 @@ def fit_response(
         Irradiation of each level (photons, a relative irradiance or the exposure time), > 0.
     y
         Dark-subtracted signal [DN].
-    sigma
-        Standard error of each signal [DN] (relative where ``absolute`` is False).
+    cov
+        Covariance of the signals [DN^2] (relative where ``absolute`` is False): a vector is
+        their variances (independent), a matrix holds the errors they share (a dark level).
     absolute
-        Whether ``sigma`` is absolute (else the slope's error is scaled by ``sqrt(chi2_red)``).
+        Whether ``cov`` is absolute (else the slope's error is scaled by ``sqrt(chi2_red)``).
 
     Raises
     ------
     BenchSimError
         Fewer than 3 levels.
     """
-    xa, ya, sa = (np.asarray(a, dtype=np.float64) for a in (x, y, sigma))
+    xa, ya = (np.asarray(a, dtype=np.float64) for a in (x, y))
+    c = np.asarray(cov, dtype=np.float64)
+    sa = np.linalg.cholesky(np.diag(c) if c.ndim == 1 else c)
     if xa.size < 3:
         raise BenchSimError(f"response fit: {xa.size} levels below 95 % of saturation, need at least 3")
     degree = 1

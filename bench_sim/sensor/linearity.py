@@ -16,9 +16,11 @@ exposure-time series at constant irradiance; the dark-subtracted mean ``y = mu_y
 5. ``LE = (max delta - min delta) / 2`` over the range [%] (the extremes are reported too).
 
 Stated error: the deviations' own scatter (``100 se(y) / fit`` at the two extreme levels, where
-the signal's standard error is given) and the placement of the saturation point on the level
-grid (LE recomputed with the saturation one level lower and higher; half their spread, as a
-uniform error), in quadrature. The second term is what a noisy variance maximum moves.
+the signal's standard error is given), the placement of the saturation point on the level grid
+(LE recomputed with the saturation one level lower and higher; half their spread, as a uniform
+error) and the noise floor, in quadrature. LE is a range, so noise alone makes it positive: the
+floor is the mean LE of the signals' noise alone about the fitted line (:data:`FLOOR_DRAWS`
+draws of a fixed generator), also reported; a measured LE at the floor is a linear camera.
 
 Prediction (:func:`predicted_linearity_error`)
 ----------------------------------------------
@@ -59,6 +61,8 @@ __all__ = [
 LE_RANGE = (0.05, 0.95)
 #: Fewest levels in the fit range
 _MIN_POINTS = 3
+#: Draws of the noise floor of LE (a fixed generator: the same series gives the same floor)
+FLOOR_DRAWS = 200
 
 
 @dataclass(frozen=True)
@@ -81,6 +85,8 @@ class LinearityError:
         The level of the saturation point.
     grid_percent
         Half the spread of LE with the saturation point one level either side [%].
+    floor_percent
+        The noise floor: the mean LE of the signals' noise alone [%] (0 without their errors).
     """
 
     le_percent: float
@@ -91,6 +97,7 @@ class LinearityError:
     offset: float
     saturation_index: int
     grid_percent: float
+    floor_percent: float
     deviation_percent: np.ndarray = field(repr=False)
     in_range: np.ndarray = field(repr=False)
 
@@ -124,6 +131,21 @@ def _fit(x: np.ndarray, y: np.ndarray, i_sat: int) -> tuple[float, float, np.nda
     with np.errstate(divide="ignore", invalid="ignore"):
         delta = np.where(line != 0, 100.0 * (y - line) / line, np.nan)
     return float(a0), float(a1), delta, mask
+
+
+def _noise_floor(x: np.ndarray, line: np.ndarray, se: np.ndarray) -> float:
+    """Mean LE [%] of a straight line ``line`` at ``x`` plus the signals' noise ``se`` alone."""
+    rng = np.random.default_rng(0)
+    out = []
+    design_x = x
+    for _ in range(FLOOR_DRAWS):
+        y = line + se * rng.standard_normal(line.size)
+        design = np.column_stack([1.0 / y, design_x / y])
+        (b0, b1), *_ = np.linalg.lstsq(design, np.ones(y.size), rcond=None)
+        fit = b0 + b1 * design_x
+        d = 100.0 * (y - fit) / fit
+        out.append(0.5 * float(d.max() - d.min()))
+    return float(np.mean(out))
 
 
 def linearity_error(
@@ -170,11 +192,12 @@ def linearity_error(
     a0, a1, delta, mask = got
     d = delta[mask]
     le = 0.5 * float(d.max() - d.min())
-    stat = 0.0
+    stat = floor = 0.0
     if signal_se_dn is not None:
         se = 100.0 * np.asarray(signal_se_dn, dtype=np.float64).ravel() / np.abs(a0 + a1 * xa)
         idx = np.flatnonzero(mask)
         stat = 0.5 * math.hypot(float(se[idx[int(np.argmax(d))]]), float(se[idx[int(np.argmin(d))]]))
+        floor = _noise_floor(xa[mask], (a0 + a1 * xa)[mask], np.asarray(signal_se_dn, dtype=np.float64)[mask])
     others = []
     for j in (i_sat - 1, i_sat + 1):
         if 0 < j < y.size and (alt := _fit(xa, y, j)) is not None:
@@ -183,13 +206,14 @@ def linearity_error(
     grid = 0.5 * (max([le, *others]) - min([le, *others]))
     return LinearityError(
         le_percent=le,
-        le_se_percent=math.hypot(stat, grid / math.sqrt(3.0)),
+        le_se_percent=math.sqrt(stat**2 + grid**2 / 3.0 + floor**2),
         le_min_percent=float(d.min()),
         le_max_percent=float(d.max()),
         slope=a1,
         offset=a0,
         saturation_index=i_sat,
         grid_percent=grid,
+        floor_percent=floor,
         deviation_percent=delta,
         in_range=mask,
     )

@@ -18,7 +18,7 @@ from bench_sim.metrics.frame_series import FrameAnalysis
 from bench_sim.metrics.ptc_table import PtcTable
 from bench_sim.workflows.calibrate_words import dr_lines, fit_lines, frames_lines, num, twin_lines
 
-__all__ = ["results_rows", "figures", "report_markdown", "FIT_QUANTITIES"]
+__all__ = ["results_rows", "figures", "defects_figure", "report_markdown", "FIT_QUANTITIES"]
 
 #: (label, value attribute, standard-error attribute or None, unit) of the table and the report
 FIT_QUANTITIES: tuple[tuple[str, str, str | None, str], ...] = (
@@ -149,7 +149,8 @@ def _residual_figure(tab: PtcTable, fit: CameraFit) -> Any:
     return fig
 
 
-def _defects_figure(frames: FrameAnalysis) -> Any:
+def defects_figure(frames: FrameAnalysis) -> Any:
+    """The DSNU and PRNU histograms of an image series with the outlier thresholds (R4 section 8)."""
     import matplotlib.pyplot as plt
 
     hists = frames.defects.histograms
@@ -181,7 +182,7 @@ def figures(
     matplotlib.use("Agg")
     out = {"ptc.png": _ptc_figure(tab, fit, curve), "residuals.png": _residual_figure(tab, fit)}
     if frames is not None and frames.defects.histograms:
-        out["defects.png"] = _defects_figure(frames)
+        out["defects.png"] = defects_figure(frames)
     return out
 
 
