@@ -312,19 +312,10 @@ def ptc(
     stages: Annotated[str, typer.Option("--stages", help="e.g. 1,10,80, 5:100:5 or all")] = "1,10,80",
     seed: SeedOpt = 0,
     out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/ptc"),
-    area: Annotated[
-        bool, typer.Option("--area", help="EMVA 1288 of the area sensor's raw frames through its chain "
-                           "of effects (LE, DSNU at 0 s, dark-current non-uniformity, defect pixels, row "
-                           "noise), against the chain's closed forms; --stages is not used")
-    ] = False,
+    area: Annotated[bool, typer.Option("--area", help=area_ptc_job.AREA_HELP)] = False,
 ) -> None:
     """Photon-transfer series through the sensor and DTDI: EMVA 1288 files and results."""
-    cfg = load_config(config)
-    if area:
-        area_ptc_job.run_area_ptc(cfg, seed=seed, out=out)
-        return
-    chosen = list(simulate_workflow.parse_stages_arg(stages, cfg.sensor.rows))
-    ptc_job.run_ptc(cfg, stages=chosen, seed=seed, out=out)
+    ptc_job.run_ptc_command(load_config(config), stages, seed, out, area=area)
 
 
 @app.command()

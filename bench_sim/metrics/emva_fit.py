@@ -264,6 +264,47 @@ def _saturation(
     return (x_sat if tab.photons is not None else math.nan), mu_e, mu_e * rel
 
 
+def _linear_range(tab: PtcTable, i_sat: int, fraction: float) -> np.ndarray:
+    """Mask of the lit levels from 0 to ``fraction`` of the saturation signal (below it)."""
+    x = tab.signal_dn
+    lin = (x > 0) & (x <= fraction * x[i_sat]) & (np.arange(x.size) < i_sat)
+    if int(lin.sum()) < MIN_LINEAR_POINTS:
+        raise BenchSimError(
+            f"{tab.source}: {int(lin.sum())} levels in the linear range (0 .. {fraction:.0%} of the "
+            f"saturation signal {x[i_sat]:.6g} DN): need at least {MIN_LINEAR_POINTS} (add levels below "
+            "saturation)"
+        )
+    return lin
+
+
+def _dark_fields(tab: PtcTable, k: float, k_se: float, q: float) -> dict[str, Any]:
+    """The dark level's fields of :class:`CameraFit` (the dark noise with ``K``'s error in it)."""
+    dvar, dvar_se, doff, idark, idark_se, idark_v = _dark_fit(tab, k)
+    if math.isfinite(idark):
+        idark_se = abs(idark) * math.hypot(idark_se / idark if idark else 0.0, k_se / k)
+    used = max(dvar, QUANTIZATION_LIMIT_DN2)
+    sig_d = math.sqrt(max(used - q, 0.0)) / k
+    return {
+        "dark_var_dn2": dvar, "dark_var_se": dvar_se, "dark_noise_dn": math.sqrt(used), "dark_noise_e": sig_d,
+        "dark_noise_e_se": sig_d * math.hypot(0.5 * dvar_se / max(used - q, 1e-12), k_se / k),
+        "dark_noise_quantization_limited": dvar < QUANTIZATION_LIMIT_DN2, "dark_offset_dn": doff,
+        "dark_offset_known": tab.dark_mean_known, "dark_current_e_s": idark, "dark_current_e_s_se": idark_se,
+        "dark_current_from_variance_e_s": idark_v,
+    }
+
+
+def _response_fields(resp: ResponseFit | None, le: LinearityError | None, linearized: bool) -> dict[str, Any]:
+    """The response's and the linearity's fields of :class:`CameraFit`."""
+    return {
+        "linearized": linearized, "response_degree": 0 if resp is None else resp.degree,
+        "response_coefficients": [] if resp is None else [float(a) for a in resp.coefficients],
+        "response_rms_relative": math.nan if resp is None else resp.rms_relative,
+        "linearity_error_percent": math.nan if le is None else le.le_percent,
+        "linearity_error_se_percent": math.nan if le is None else le.le_se_percent,
+        "response": resp, "linearity": le,
+    }
+
+
 def fit_camera(
     tab: PtcTable,
     *,
@@ -280,17 +321,10 @@ def fit_camera(
     """
     x = tab.signal_dn
     i_sat, lower_bound = _saturation_index(tab.var_dn2)
-    lin = (x > 0) & (x <= fraction * x[i_sat]) & (np.arange(x.size) < i_sat)
-    if int(lin.sum()) < MIN_LINEAR_POINTS:
-        raise BenchSimError(
-            f"{tab.source}: {int(lin.sum())} levels in the linear range (0 .. {fraction:.0%} of the "
-            f"saturation signal {x[i_sat]:.6g} DN): need at least {MIN_LINEAR_POINTS} (add levels below "
-            "saturation)"
-        )
+    lin = _linear_range(tab, i_sat, fraction)
     resp, le = _response(tab, i_sat)
     linearized = resp is not None and resp.degree > 1 and tab.irradiance is not None
-    if linearized:
-        assert resp is not None and tab.irradiance is not None
+    if resp is not None and linearized and tab.irradiance is not None:
         s, ratio = resp.slope * tab.irradiance, resp.gain_ratio(tab.irradiance)
     else:
         s, ratio = x, np.ones(x.size)
@@ -303,74 +337,26 @@ def fit_camera(
     r, r_se, chi2_r, rf = _responsivity(tab, lin, resp, linearized)
     qe_known = tab.photons is not None and math.isfinite(r)
     eta = r / k if qe_known else math.nan
-    eta_se = eta * math.hypot(r_se / r, k_se / k) if qe_known else math.nan
-    dvar, dvar_se, doff, idark, idark_se, idark_v = _dark_fit(tab, k)
-    idark_se = (
-        abs(idark) * math.hypot(idark_se / idark if idark else 0.0, k_se / k)
-        if math.isfinite(idark)
-        else idark_se
-    )
-    dvar_used = max(dvar, QUANTIZATION_LIMIT_DN2)
-    sig_d = math.sqrt(max(dvar_used - quantization_var_dn2, 0.0)) / k
-    sig_d_se = sig_d * math.hypot(0.5 * dvar_se / max(dvar_used - quantization_var_dn2, 1e-12), k_se / k)
-    p_sat, mu_e_sat, mu_e_sat_se = _saturation(
-        tab, i_sat, k, k_se, r if qe_known or tab.irradiance is not None else math.nan, r_se
-    )
+    dark = _dark_fields(tab, k, k_se, quantization_var_dn2)
+    p_sat, mu_e_sat, mu_e_sat_se = _saturation(tab, i_sat, k, k_se, r, r_se)
     clips, pvar, plateau = clip_kind(tab, i_sat)
-    e_min = math.sqrt(dvar_used / k**2 + 0.25) + 0.5  # eta mu_p.min [e-] (EMVA 1288 R4)
+    e_min = math.sqrt(dark["dark_noise_dn"] ** 2 / k**2 + 0.25) + 0.5  # eta mu_p.min [e-] (EMVA 1288 R4)
     bits = tab.bits if tab.bits is not None else max(8, math.ceil(math.log2(float(tab.mean_dn.max()) + 1.0)))
+    nan = math.nan
     snr = np.where(tab.var_dn2 > 0, x / np.sqrt(np.maximum(tab.var_dn2, 1e-300)), np.inf)
     return CameraFit(
-        k_dn_per_e=k,
-        k_se=k_se,
-        k_se_statistical=kf.slope_se_statistical,
-        responsivity_dn_per_photon=r if qe_known else math.nan,
-        responsivity_se=r_se if qe_known else math.nan,
+        k_dn_per_e=k, k_se=k_se, k_se_statistical=kf.slope_se_statistical,
+        responsivity_dn_per_photon=r if qe_known else nan, responsivity_se=r_se if qe_known else nan,
         quantum_efficiency=eta,
-        quantum_efficiency_se=eta_se,
-        qe_known=qe_known,
-        dark_var_dn2=dvar,
-        dark_var_se=dvar_se,
-        dark_noise_dn=math.sqrt(dvar_used),
-        dark_noise_e=sig_d,
-        dark_noise_e_se=sig_d_se,
-        dark_noise_quantization_limited=dvar < QUANTIZATION_LIMIT_DN2,
-        dark_offset_dn=doff,
-        dark_offset_known=tab.dark_mean_known,
-        dark_current_e_s=idark,
-        dark_current_e_s_se=idark_se,
-        dark_current_from_variance_e_s=idark_v,
-        exposure_s=float(np.median(tab.exposure_s)),
-        exposure_min_s=float(tab.exposure_s.min()),
-        exposure_max_s=float(tab.exposure_s.max()),
-        photons_sat=p_sat,
-        saturation_signal_dn=float(x[i_sat]),
-        saturation_capacity_e=mu_e_sat,
-        saturation_capacity_e_se=mu_e_sat_se,
-        saturation_lower_bound=lower_bound,
-        plateau_dn=plateau,
-        plateau_var_dn2=pvar,
-        clips_on=clips,
-        photons_min=e_min / eta if qe_known else math.nan,
-        dynamic_range_db=20.0 * math.log10(mu_e_sat / e_min),
-        snr_max=math.sqrt(mu_e_sat),
-        bits=int(bits),
-        bits_inferred=tab.bits is None,
-        chi2_red_k=kf.chi2_red,
-        chi2_red_r=chi2_r,
-        k_misfit=kf.scaled and tab.pixels is not None,
-        saturation_index=i_sat,
-        irradiance_kind=tab.irradiance_kind,
-        linearized=linearized,
-        response_degree=0 if resp is None else resp.degree,
-        response_coefficients=[] if resp is None else [float(a) for a in resp.coefficients],
-        response_rms_relative=math.nan if resp is None else resp.rms_relative,
-        linearity_error_percent=math.nan if le is None else le.le_percent,
-        linearity_error_se_percent=math.nan if le is None else le.le_se_percent,
-        k_fit=kf,
-        r_fit=rf,
-        linear=lin,
-        snr=snr,
-        response=resp,
-        linearity=le,
+        quantum_efficiency_se=eta * math.hypot(r_se / r, k_se / k) if qe_known else nan,
+        qe_known=qe_known, **dark, exposure_s=float(np.median(tab.exposure_s)),
+        exposure_min_s=float(tab.exposure_s.min()), exposure_max_s=float(tab.exposure_s.max()),
+        photons_sat=p_sat, saturation_signal_dn=float(x[i_sat]), saturation_capacity_e=mu_e_sat,
+        saturation_capacity_e_se=mu_e_sat_se, saturation_lower_bound=lower_bound, plateau_dn=plateau,
+        plateau_var_dn2=pvar, clips_on=clips, photons_min=e_min / eta if qe_known else nan,
+        dynamic_range_db=20.0 * math.log10(mu_e_sat / e_min), snr_max=math.sqrt(mu_e_sat), bits=int(bits),
+        bits_inferred=tab.bits is None, chi2_red_k=kf.chi2_red, chi2_red_r=chi2_r,
+        k_misfit=kf.scaled and tab.pixels is not None, saturation_index=i_sat,
+        irradiance_kind=tab.irradiance_kind, **_response_fields(resp, le, linearized), k_fit=kf, r_fit=rf,
+        linear=lin, snr=snr,
     )

@@ -258,7 +258,7 @@ def _spatial(
     return {
         "exposure_s": float(dark.exposure_s[j]),
         "prnu_level_signal_dn": signal,
-        "dsnu_e": dsnu.summary(1.0 / k, "_e"),
+        "dsnu_e": dsnu.summary(1.0 / k, "_e", fit.k_se / k),
         "prnu": prnu.summary(1.0 / signal, ""),
     }
 
@@ -284,8 +284,8 @@ def _dsnu_split(
     )
     return {
         "exposures_s": dark.exposure_s.tolist(),
-        "dsnu0_e": off.summary(1.0 / k, "_e"),
-        "dark_current_nu_e_s": rate.summary(1.0 / k, "_e_s"),
+        "dsnu0_e": off.summary(1.0 / k, "_e", fit.k_se / k),
+        "dark_current_nu_e_s": rate.summary(1.0 / k, "_e_s", fit.k_se / k),
         "dark_current_mean_e_s": float(np.nanmean(np.where(full, maps.slope_dn_s, np.nan))) / k,
         "offset_noise_e": math.sqrt(maps.offset_noise_dn2) / k,
         "slope_noise_e_s": math.sqrt(maps.slope_noise_dn2_s2) / k,

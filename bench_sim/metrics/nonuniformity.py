@@ -10,14 +10,18 @@ its column means ``c``, row means ``r`` and the residual ``e = Y - c - r + mean`
 
 * pixel part: ``s_pix^2 = sum e^2 / ((M - 1)(N - 1)) - v`` (a white pattern's share of ``e``);
 * column part: ``s_col^2 = var(c) - (s_pix^2 + v) / M``; row part likewise with ``N``;
-* total: their sum.
+* total: the map's variance less the noise, ``var(Y) - v - v_row`` (the pattern's own spatial
+  variance over its pixels, what EMVA 1288's DSNU and PRNU are).
 
 A temporal noise common to a row (row noise, variance ``v_row`` in the map) is in the row means
 whole and taken off the row part; it shifts every column mean alike (not in their spread) and is
 not in the pixel part.
 
-Each has the standard error of a variance of that many independent values,
-``sqrt(2 / dof)`` times the raw variance; an rms ``s`` has ``se(s^2) / (2 s)``.
+Each has the standard error of the physical sensor's own value (its drawn pattern is what it is;
+the error is what the residual noise ``v`` of each mean makes of it): a variance ``s^2`` from
+``dof`` values of noise variance ``v`` has ``se^2 = (2 v^2 + 4 s^2 v) / dof`` (for the column and
+row parts ``v`` is the variance of a column's or a row's mean about its pattern: the noise and
+the pixel pattern's share); an rms ``s`` has ``se(s^2) / (2 s)``.
 
 Dark signal split (:func:`dark_series_maps`)
 --------------------------------------------
@@ -86,8 +90,8 @@ def own_temporal_var(stack: np.ndarray, mask: np.ndarray | None = None) -> float
     keep = np.ones(y.shape[1:], dtype=bool) if mask is None else mask
     yy = np.where(keep[None], y, np.nan)
     n = float(np.mean(keep.sum(axis=1)))
-    resid = yy - np.nanmean(yy, axis=2, keepdims=True)
-    return float(np.nanmean(np.nanvar(resid, axis=0, ddof=1))) * n / max(n - 1.0, 1.0)
+    resid = (yy - np.nanmean(yy, axis=2, keepdims=True))[:, keep]
+    return float(np.mean(np.var(resid, axis=0, ddof=1))) * n / max(n - 1.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -111,13 +115,20 @@ class SpatialComponents:
             return 0.0, math.sqrt(max(se, 0.0))
         return math.sqrt(var), se / (2.0 * math.sqrt(var))
 
-    def summary(self, scale: float = 1.0, unit: str = "") -> dict[str, float]:
-        """rms of each part and its error, times ``scale`` (e.g. ``1 / K``), keys suffixed ``unit``."""
+    def summary(self, scale: float = 1.0, unit: str = "", scale_rel_se: float = 0.0) -> dict[str, float]:
+        """rms of each part and its error, times ``scale`` (e.g. ``1 / K``, whose relative error
+        ``scale_rel_se`` joins each part's), keys suffixed ``unit``."""
         out = {}
         for part in ("total", "column", "row", "pixel"):
             s, se = self.rms(getattr(self, part), getattr(self, f"{part}_se"))
-            out[f"{part}{unit}"], out[f"{part}_se{unit}"] = s * scale, se * scale
+            out[f"{part}{unit}"] = s * scale
+            out[f"{part}_se{unit}"] = math.hypot(se, s * scale_rel_se) * scale
         return out
+
+
+def _sensor_se(var: float, noise: float, dof: float) -> float:
+    """Standard error of a pattern's variance ``var`` from ``dof`` values of noise ``noise``."""
+    return math.sqrt(max(2.0 * noise**2 + 4.0 * max(var, 0.0) * noise, 0.0) / max(dof, 1.0))
 
 
 def spatial_components(image: np.ndarray, noise_var: float, row_noise_var: float = 0.0) -> SpatialComponents:
@@ -149,15 +160,17 @@ def spatial_components(image: np.ndarray, noise_var: float, row_noise_var: float
     var_c, var_r = float(np.var(col, ddof=1)), float(np.var(row, ddof=1))
     column = var_c - raw_pix / (m * frac)
     row_v = var_r - raw_pix / (n * frac) - row_noise_var
-    se_pix = raw_pix * math.sqrt(2.0 / dof_pix)
-    se_col = var_c * math.sqrt(2.0 / (n - 1))
-    se_row = var_r * math.sqrt(2.0 / (m - 1))
+    se_pix = _sensor_se(pixel, noise_var, dof_pix)
+    se_col = _sensor_se(column, raw_pix / (m * frac), n - 1)
+    se_row = _sensor_se(row_v, raw_pix / (n * frac) + row_noise_var, m - 1)
+    n_px = float(good.sum())
+    total = float(np.nanvar(y)) - (noise_var + row_noise_var) * (1.0 - 1.0 / n_px)
     return SpatialComponents(
-        total=column + row_v + pixel,
+        total=total,
         column=column,
         row=row_v,
         pixel=pixel,
-        total_se=math.sqrt(se_pix**2 + se_col**2 + se_row**2),
+        total_se=_sensor_se(total, noise_var + row_noise_var, n_px),
         column_se=se_col,
         row_se=se_row,
         pixel_se=se_pix,
@@ -180,10 +193,10 @@ class DarkSeriesMaps:
 
 
 def dark_series_maps(
-    exposure_s: Sequence[float],
+    exposure_s: np.ndarray | Sequence[float],
     mean_maps: np.ndarray,
-    temporal_var_dn2: Sequence[float],
-    images: Sequence[int],
+    temporal_var_dn2: np.ndarray | Sequence[float],
+    images: np.ndarray | Sequence[int],
     clip_dn: float | np.ndarray,
 ) -> DarkSeriesMaps:
     """The per-pixel dark lines of a dark series (module docstring).
@@ -260,7 +273,7 @@ def row_noise_variance(stacks: Sequence[np.ndarray], mask: np.ndarray | None = N
         n_eff = float(np.mean(keep.sum(axis=1)))
         row_means = np.nanmean(yy, axis=2)  # (L, M)
         v_row = float(np.nanmean(np.nanvar(row_means, axis=0, ddof=1)))
-        v_pix = float(np.nanmean(np.nanvar(yy, axis=0, ddof=1)))
+        v_pix = float(np.mean(np.var(y[:, keep], axis=0, ddof=1)))
         d = y.shape[1] * (y.shape[0] - 1)
         est = (v_row - v_pix / n_eff) / (1.0 - 1.0 / n_eff)
         num, den, pix, dof = num + d * est, den + d, pix + d * v_pix, dof + d

@@ -205,6 +205,29 @@ def _means(cols: dict[str, np.ndarray], source: str) -> tuple[np.ndarray, np.nda
     return mean, var, "mean_dn" in cols or has_dark_mean
 
 
+def _dark_levels(
+    cols: dict[str, np.ndarray], mean: np.ndarray, var: np.ndarray, lit: np.ndarray, drk: np.ndarray,
+    source: str,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every lit row's dark (mean, variance), the distinct dark exposures and their levels: from
+    the dark columns of each row (and the dark rows), or from the dark rows of the same exposure."""
+    t = cols["exposure_s"]
+    if "dark_mean_dn" in cols or "dark_var_dn2" in cols:
+        dm = cols.get("dark_mean_dn", np.zeros(t.size))
+        if "dark_var_dn2" not in cols:
+            raise BenchSimError(f"{source}: dark_mean_dn without dark_var_dn2: give both dark columns")
+        dt, dmm, dv = t[lit], dm[lit], cols["dark_var_dn2"][lit]
+        if drk.size:  # the dark rows count as well
+            dt, dmm, dv = (np.concatenate([a[drk], b]) for a, b in ((t, dt), (mean, dmm), (var, dv)))
+        pairs = np.column_stack([dmm[-lit.size :], dv[-lit.size :]])
+    else:
+        dt, dmm, dv = t[drk], mean[drk], var[drk]
+        pairs = np.array([_dark_for(float(v), dt, dmm, dv, source) for v in t[lit]]).reshape(-1, 2)
+    ut = np.unique(dt)
+    levels = np.array([_dark_for(float(v), dt, dmm, dv, source) for v in ut]).reshape(-1, 2)
+    return pairs, ut, levels
+
+
 def make_table(
     exposure_s: Any,
     *,
@@ -240,17 +263,10 @@ def make_table(
         their irradiation not increasing; a lit level without a dark level; a missing column.
     """
     n = np.asarray(exposure_s, dtype=object).ravel().size
-    given = {
-        "exposure_s": exposure_s,
-        "photons_per_pixel": photons_per_pixel,
-        "relative_irradiance": relative_irradiance,
-        "mean_dn": mean_dn,
-        "var_dn2": var_dn2,
-        "signal_dn": signal_dn,
-        "signal_var_dn2": signal_var_dn2,
-        "dark_mean_dn": dark_mean_dn,
-        "dark_var_dn2": dark_var_dn2,
-    }
+    given = {"exposure_s": exposure_s, "photons_per_pixel": photons_per_pixel,
+             "relative_irradiance": relative_irradiance, "mean_dn": mean_dn, "var_dn2": var_dn2,
+             "signal_dn": signal_dn, "signal_var_dn2": signal_var_dn2, "dark_mean_dn": dark_mean_dn,
+             "dark_var_dn2": dark_var_dn2}
     cols = {k: _col(k, v, n, source) for k, v in given.items() if v is not None}
     flag = None if dark is None else _col("dark", dark, n, source) != 0
     is_dark, x, kind = _irradiance(cols, flag)
@@ -259,19 +275,7 @@ def make_table(
     lit, drk = np.flatnonzero(~is_dark), np.flatnonzero(is_dark)
     t = cols["exposure_s"]
     _check_rows(cols, lit, x if kind != "none" else None, source)
-    if "dark_mean_dn" in cols or "dark_var_dn2" in cols:
-        dm = cols.get("dark_mean_dn", np.zeros(n))
-        if "dark_var_dn2" not in cols:
-            raise BenchSimError(f"{source}: dark_mean_dn without dark_var_dn2: give both dark columns")
-        dt, dmm, dv = t[lit], dm[lit], cols["dark_var_dn2"][lit]
-        if drk.size:  # the dark rows count as well
-            dt, dmm, dv = (np.concatenate([a[drk], b]) for a, b in ((t, dt), (mean, dmm), (var, dv)))
-        pairs = np.column_stack([dmm[-lit.size :], dv[-lit.size :]])
-    else:
-        dt, dmm, dv = t[drk], mean[drk], var[drk]
-        pairs = np.array([_dark_for(float(v), dt, dmm, dv, source) for v in t[lit]]).reshape(-1, 2)
-    ut = np.unique(dt)
-    levels = np.array([_dark_for(float(v), dt, dmm, dv, source) for v in ut]).reshape(-1, 2)
+    pairs, ut, levels = _dark_levels(cols, mean, var, lit, drk, source)
     return PtcTable(
         exposure_s=t[lit],
         photons=x[lit] if kind == "photons" else None,

@@ -69,7 +69,7 @@ class ResponseFit:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """``y(x)`` [DN]."""
         xa = np.asarray(x, dtype=np.float64)
-        return sum(a * xa ** (k + 1) for k, a in enumerate(self.coefficients))  # type: ignore[return-value]
+        return sum(a * xa ** (k + 1) for k, a in enumerate(self.coefficients))
 
     def gain_ratio(self, x: np.ndarray) -> np.ndarray:
         """``f'(s) = P'(x) / a_1``: the response's slope relative to its small-signal slope [1]."""

@@ -31,7 +31,13 @@ from bench_sim.workflows.estimates import estimate_area_ptc
 from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
 
-__all__ = ["run_area_ptc", "AREA_ROWS", "AREA_COLUMNS"]
+__all__ = ["run_area_ptc", "AREA_ROWS", "AREA_COLUMNS", "AREA_HELP"]
+
+#: ``bench-sim ptc --area``'s help
+AREA_HELP = (
+    "EMVA 1288 of the area sensor's raw frames through its chain of effects (LE, DSNU at 0 s, the dark "
+    "current's non-uniformity, defect pixels, row noise) against the chain's closed forms; --stages not used"
+)
 
 #: The window of the physical sensor measured (top-left, clamped to the sensor)
 AREA_ROWS, AREA_COLUMNS = 64, 128

@@ -174,6 +174,27 @@ def _with_files(twin: Twin, folder: Path) -> dict[str, Any]:
     return sec
 
 
+def _write(
+    out_path: Path, result: dict[str, Any], meta: dict[str, Any], twin: Twin, inp: CalibrationInput,
+    fit: CameraFit | None, figs: dict[str, Any],
+) -> None:
+    """Every file of the calibration as one output set (module docstring)."""
+    record = {"command": "calibrate", **{k: meta[k] for k in ("version", "seed", "config_sha256")}}
+    img_meta = {k: v for k, v in meta.items() if k not in ("config", "versions")}
+    with output_set(out_path, record) as tmp:
+        write_text(tmp / "sensor.toml", _sensor_toml(twin, meta, inp))
+        for name, text in twin.files.items():
+            write_text(tmp / name, text)
+        write_csv(tmp / "calibration.csv", ["quantity", "value", "standard_error", "unit"],
+                  results_rows(fit, inp.results, twin.sensor), img_meta)
+        for name, fig in figs.items():
+            write_figure_png(tmp / name, fig, img_meta)
+        result["files"] = ["sensor.toml", *twin.files, "calibration.csv", "calibration.json", "report.md",
+                           *figs]
+        write_text(tmp / "report.md", report_markdown(result, list(figs)))
+        write_json(tmp / "calibration.json", result)
+
+
 def calibrate(
     input_path: str | Path,
     out: str | Path,
@@ -231,46 +252,12 @@ def calibrate(
     t_exp = fit.exposure_s if fit is not None else inp.results.get("exposure_s", base.timing.t_int_s)
     meta = provenance(cfg, int(seed), input=str(inp.path), input_kind=inp.kind)
     result: dict[str, Any] = {
-        **meta,
-        "command": "calibrate",
-        "stages": [mu1, mu2],
-        "sensor": twin.sensor,
-        "kept_from_base": twin.kept,
-        "unknown": twin.unknown,
-        "notes": twin.notes,
-        "fit": fit.summary() if fit is not None else None,
-        "frames": None if frames is None else frames.summary(),
-        "published": inp.results or None,
-        "spatial": inp.spatial or None,
-        "model_check": _model_check(cfg, t_exp),
-        "model_curve": curve,
+        **meta, "command": "calibrate", "stages": [mu1, mu2], "sensor": twin.sensor,
+        "kept_from_base": twin.kept, "unknown": twin.unknown, "notes": twin.notes,
+        "fit": fit.summary() if fit is not None else None, "frames": None if frames is None else frames.summary(), "published": inp.results or None,
+        "spatial": inp.spatial or None, "model_check": _model_check(cfg, t_exp), "model_curve": curve,
         "dynamic_range": dr,
     }
-    figs = (
-        figures(tab, fit, curve, frames) if fit is not None and tab is not None and curve is not None else {}
-    )
-    record = {"command": "calibrate", **{k: meta[k] for k in ("version", "seed", "config_sha256")}}
-    img_meta = {k: v for k, v in meta.items() if k not in ("config", "versions")}
-    with output_set(out_path, record) as tmp:
-        write_text(tmp / "sensor.toml", _sensor_toml(twin, meta, inp))
-        for name, text in twin.files.items():
-            write_text(tmp / name, text)
-        write_csv(
-            tmp / "calibration.csv",
-            ["quantity", "value", "standard_error", "unit"],
-            results_rows(fit, inp.results, twin.sensor),
-            img_meta,
-        )
-        for name, fig in figs.items():
-            write_figure_png(tmp / name, fig, img_meta)
-        result["files"] = [
-            "sensor.toml",
-            *twin.files,
-            "calibration.csv",
-            "calibration.json",
-            "report.md",
-            *figs,
-        ]
-        write_text(tmp / "report.md", report_markdown(result, list(figs)))
-        write_json(tmp / "calibration.json", result)
+    figs = figures(tab, fit, curve, frames) if fit is not None and tab is not None and curve else {}
+    _write(out_path, result, meta, twin, inp, fit, figs)
     return result

@@ -124,9 +124,15 @@ def predict_dr(
     t, s = cfg.timing.t_int_s, cfg.sensor
     ped = measurement_pedestal_dn(cfg, (mu1, mu2))
     beta = cfg.dtdi.beta_bits
-    kw = {"beta_bits": beta, "subtract_black": cfg.dtdi.subtract_black, "pedestal_dn": ped}
-    vmax = {m: stage_variance_maximum_photons(s, t, m, **kw) for m in (mu1, mu2)}
-    clip = {m: stage_saturation_photons(s, t, m, **kw) for m in (mu1, mu2)}
+    sub = cfg.dtdi.subtract_black
+    vmax = {
+        m: stage_variance_maximum_photons(s, t, m, beta_bits=beta, subtract_black=sub, pedestal_dn=ped)
+        for m in (mu1, mu2)
+    }
+    clip = {
+        m: stage_saturation_photons(s, t, m, beta_bits=beta, subtract_black=sub, pedestal_dn=ped)
+        for m in (mu1, mu2)
+    }
     snr1 = {m: stage_snr1_photons(s, t, m) for m in (mu1, mu2)}
     emva = {
         "gamma1": 20 * math.log10(vmax[mu1] / snr1[mu1]),

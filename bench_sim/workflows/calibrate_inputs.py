@@ -56,10 +56,26 @@ __all__ = [
 
 REQUIRED_COLUMNS = ("exposure_s",)
 #: the per-row columns of a table (make_table's keywords)
-_SERIES_COLUMNS = ("photons_per_pixel", "relative_irradiance", "mean_dn", "var_dn2", "signal_dn",
-                   "signal_var_dn2", "dark_mean_dn", "dark_var_dn2")
-_ALL_COLUMNS = ("exposure_s", *_SERIES_COLUMNS, "kind", "wavelength_nm", "pixels", "bits", "images",
-                "quantization_var_dn2")
+_SERIES_COLUMNS = (
+    "photons_per_pixel",
+    "relative_irradiance",
+    "mean_dn",
+    "var_dn2",
+    "signal_dn",
+    "signal_var_dn2",
+    "dark_mean_dn",
+    "dark_var_dn2",
+)
+_ALL_COLUMNS = (
+    "exposure_s",
+    *_SERIES_COLUMNS,
+    "kind",
+    "wavelength_nm",
+    "pixels",
+    "bits",
+    "images",
+    "quantization_var_dn2",
+)
 #: a row's ``kind`` -> whether it is a dark row
 _ROW_KINDS = {"dark": True, "flat": False, "light": False, "bright": False}
 #: key -> (required, lower bound, upper bound, meaning)
@@ -167,24 +183,37 @@ def read_table_csv(path: Path) -> CalibrationInput:
         dark = [_ROW_KINDS[v] for v in kinds]
     consts = {k: const(k) for k in ("pixels", "bits", "images", "wavelength_nm", "quantization_var_dn2")}
     table = make_table(
-        num("exposure_s"), **{c: num(c) for c in _SERIES_COLUMNS}, dark=dark,
+        num("exposure_s"),
+        photons_per_pixel=num("photons_per_pixel"),
+        relative_irradiance=num("relative_irradiance"),
+        mean_dn=num("mean_dn"),
+        var_dn2=num("var_dn2"),
+        signal_dn=num("signal_dn"),
+        signal_var_dn2=num("signal_var_dn2"),
+        dark_mean_dn=num("dark_mean_dn"),
+        dark_var_dn2=num("dark_var_dn2"),
+        dark=dark,
         pixels=None if consts["pixels"] is None else int(consts["pixels"]),
         bits=None if consts["bits"] is None else int(consts["bits"]),
         images=2 if consts["images"] is None else int(consts["images"]),
         dark_images=2 if consts["images"] is None else int(consts["images"]),
-        wavelength_nm=consts["wavelength_nm"], source=str(path),
+        wavelength_nm=consts["wavelength_nm"],
+        source=str(path),
     )
     q = consts["quantization_var_dn2"]
-    return CalibrationInput(kind="table", path=path, table=table,
-                            quantization_var_dn2=QUANTIZATION_VAR_DN2 if q is None else q)
+    return CalibrationInput(
+        kind="table", path=path, table=table, quantization_var_dn2=QUANTIZATION_VAR_DN2 if q is None else q
+    )
 
 
 def _check_results(path: Path, values: dict[str, float]) -> dict[str, float]:
     for key, (required, lo, hi, meaning) in RESULT_KEYS.items():
         if key not in values:
             if required:
-                raise BenchSimError(f"{path}: missing {key} ({meaning}); required: K_dn_per_e, "
-                                    "dark_noise_e, saturation_capacity_e")
+                raise BenchSimError(
+                    f"{path}: missing {key} ({meaning}); required: K_dn_per_e, "
+                    "dark_noise_e, saturation_capacity_e"
+                )
             continue
         v = values[key]
         ok = math.isfinite(v) and (lo < v <= hi if key in ("K_dn_per_e", "qe") else lo <= v <= hi)
@@ -309,8 +338,15 @@ def read_descriptor(path: Path) -> CalibrationInput:
         spatial = {"dsnu_dn": sp["dsnu_e"], "prnu": sp["prnu"], "exposure_s": stack_t["d"]}
     lit = sorted((r for r in rows if r[1] > 0), key=lambda r: r[1])
     arr = np.array([*(r for r in rows if r[1] == 0), *lit], dtype=np.float64).reshape(-1, 4)
-    table = make_table(arr[:, 0], photons_per_pixel=arr[:, 1], mean_dn=arr[:, 2], var_dn2=arr[:, 3],
-                       pixels=width * height, bits=bits, source=str(path))
+    table = make_table(
+        arr[:, 0],
+        photons_per_pixel=arr[:, 1],
+        mean_dn=arr[:, 2],
+        var_dn2=arr[:, 3],
+        pixels=width * height,
+        bits=bits,
+        source=str(path),
+    )
     return CalibrationInput(kind="descriptor", path=path, table=table, spatial=spatial)
 
 

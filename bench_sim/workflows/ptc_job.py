@@ -55,11 +55,13 @@ from bench_sim.measure.ptc import (
     plan_ptc,
     stage_quantization_var_dn2,
 )
+from bench_sim.workflows.area_ptc_job import run_area_ptc
 from bench_sim.workflows.estimates import estimate_ptc
 from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
+from bench_sim.workflows.simulate import parse_stages_arg
 
-__all__ = ["write_ptc", "run_ptc", "SUMMARY_COLUMNS"]
+__all__ = ["write_ptc", "run_ptc", "run_ptc_command", "SUMMARY_COLUMNS"]
 
 def _plots(results: dict[int, StageResult]) -> dict[str, Any]:
     """The PTC and SNR figures (matplotlib, not yet written)."""
@@ -318,3 +320,13 @@ def run_ptc(
     images = measure_ptc(cfg, plan, int(seed))
     results = analyse_ptc(cfg, plan, images)
     return write_ptc(out, cfg, int(seed), plan, images, results)
+
+
+def run_ptc_command(cfg: BenchConfig, stages: str, seed: int, out: Path, *, area: bool = False) -> None:
+    """``bench-sim ptc``: the stages' series (:func:`run_ptc`, ``--stages`` as the command line
+    gives it), or with ``area`` the area sensor's raw frames
+    (:func:`bench_sim.workflows.area_ptc_job.run_area_ptc`; ``--stages`` not used)."""
+    if area:
+        run_area_ptc(cfg, seed=seed, out=out)
+        return
+    run_ptc(cfg, stages=list(parse_stages_arg(stages, cfg.sensor.rows)), seed=seed, out=out)

@@ -62,10 +62,12 @@ class LabCamera:
 
     def mean_signal_dn(self, photons: float, t: float) -> float:
         """Noise-free mean of the good pixels' signal [DN] (lit less dark) at one step."""
+
         def mean(p: float) -> float:
             e = self.qe * p * self.gain + (self.dark_map + self.hot_extra) * t
             y = self.k * self.response(np.minimum(e, self.full_well_e))
             return float(np.mean(y[~self.hot_mask]))
+
         return mean(photons) - mean(0.0)
 
     def frames(self, photons: float, t: float, count: int) -> np.ndarray:
@@ -83,19 +85,23 @@ class LabCamera:
         t = np.linspace(t_max / steps, t_max, steps)
         ph = self.photon_rate * t
         return {
-            "exposure_s": t, "photons_per_pixel": ph,
+            "exposure_s": t,
+            "photons_per_pixel": ph,
             "flats": np.stack([self.frames(p, ti, 2) for p, ti in zip(ph, t, strict=True)]),
-            "darks": np.stack([self.frames(0.0, ti, 2) for ti in t]), "bits": np.array(self.bits),
+            "darks": np.stack([self.frames(0.0, ti, 2) for ti in t]),
+            "bits": np.array(self.bits),
         }
 
 
 def pair_table(series: dict[str, np.ndarray]) -> list[list[float]]:
     """A lab's table from the images (numpy alone, every pixel): per step the dark row and the lit
     row, ``exposure_s, kind (1 = dark), mean, variance`` by EMVA 1288's pair formula."""
+
     def pair(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
         a, b = a.astype(np.float64), b.astype(np.float64)
         d = (a - a.mean()) - (b - b.mean())
-        return 0.5 * (a.mean() + b.mean()), 0.5 * float(np.mean(d * d))
+        return 0.5 * float(a.mean() + b.mean()), 0.5 * float(np.mean(d * d))
+
     rows = []
     for t, flat, dark in zip(series["exposure_s"], series["flats"], series["darks"], strict=True):
         rows.append([float(t), 1.0, *pair(*dark)])
