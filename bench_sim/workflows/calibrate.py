@@ -254,7 +254,8 @@ def calibrate(
     result: dict[str, Any] = {
         **meta, "command": "calibrate", "stages": [mu1, mu2], "sensor": twin.sensor,
         "kept_from_base": twin.kept, "unknown": twin.unknown, "notes": twin.notes,
-        "fit": fit.summary() if fit is not None else None, "frames": None if frames is None else frames.summary(), "published": inp.results or None,
+        "fit": fit.summary() if fit is not None else None,
+        "frames": None if frames is None else frames.summary(), "published": inp.results or None,
         "spatial": inp.spatial or None, "model_check": _model_check(cfg, t_exp), "model_curve": curve,
         "dynamic_range": dr,
     }
