@@ -13,7 +13,7 @@ window a measurement exposes):
   pattern's ``dsnu0_e``, the row noise's ``row_noise_var_dn2``, the defect pixels' counts and
   positions, the response at the full well;
 * where levels are given, the linearity error of the whole chain on them
-  (:func:`bench_sim.sensor.linearity.predicted_linearity_error`).
+  (:func:`bench_sim.sensor.response_curve.predicted_linearity_error`).
 
 References
 ----------
@@ -28,7 +28,7 @@ from bench_sim.config import SensorConfig
 from bench_sim.sensor.effects.base import EmvaTerm
 from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.sensor.fixed_pattern import FixedPattern
-from bench_sim.sensor.linearity import predicted_linearity_error
+from bench_sim.sensor.response_curve import predicted_linearity_error
 
 __all__ = ["default_emva_terms", "defect_mask", "sensor_emva_terms"]
 

@@ -39,7 +39,7 @@ from bench_sim.metrics.emva_fit import CameraFit, fit_camera
 from bench_sim.metrics.frame_series import FrameAnalysis, analyse_frames
 from bench_sim.metrics.ptc_table import PtcTable
 from bench_sim.sensor.fixed_pattern import draw_fixed_pattern
-from bench_sim.sensor.linearity import chain_response_curve
+from bench_sim.sensor.response_curve import chain_response_curve
 from bench_sim.sensor.saturation import stage_variance_maximum_photons
 from bench_sim.workflows.calibrate_dr import parse_stage_pair, predict_dr
 from bench_sim.workflows.calibrate_inputs import CalibrationInput, read_input
@@ -94,7 +94,7 @@ def _model_check(cfg: BenchConfig, t_exp: float) -> dict[str, float]:
 
 def model_curve(cfg: BenchConfig, fit: CameraFit, tab: PtcTable, seed: int) -> dict[str, list[float]]:
     """The twin's exact mean signal [DN] and temporal variance [DN^2] at every lit level of the
-    data (each read through its chain, :func:`bench_sim.sensor.linearity.chain_response_curve`,
+    data (each read through its chain, :func:`bench_sim.sensor.response_curve.chain_response_curve`,
     averaged over a window of its pixels less the defects): the levels' linear electrons from the
     fit, over the twin's QE."""
     s = cfg.sensor

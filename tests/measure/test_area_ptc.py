@@ -20,7 +20,8 @@ from bench_sim.metrics.frame_series import analyse_frames
 from bench_sim.metrics.nonuniformity import spatial_components
 from bench_sim.sensor.emva_terms import sensor_emva_terms
 from bench_sim.sensor.fixed_pattern import draw_fixed_pattern
-from bench_sim.sensor.linearity import chain_response_curve, linearity_error
+from bench_sim.sensor.linearity import linearity_error
+from bench_sim.sensor.response_curve import chain_response_curve
 from bench_sim.workflows.calibrate import calibrate
 
 pytestmark = pytest.mark.physics
