@@ -197,3 +197,25 @@ def test_a_word_that_caps_stage_10_is_named_with_the_width_that_removes_it(tmp_p
         and f"a word of {need} bits removes the cap" in report
     )
     assert "clips on" in report and "output word" in report
+
+
+def test_a_misfit_is_said_in_words_and_widens_the_errors(tmp_path: Path) -> None:
+    """An illumination series with no irradiation given (no linearisation possible) whose variance
+    bends 6 % at the clip, 65 536 pixels: chi2_red above its 99 % quantile; the report says the linear
+    model does not fit and by how much, and K's error is the statistical one times sqrt(chi2_red)."""
+    rng = np.random.default_rng(4)
+    sig = np.r_[np.linspace(20, 3600, 30), [3700.0, 3750.0, 3760.0]]
+    var = 4.0 + 0.5 * sig * (1 - 0.06 * (sig / 3600) ** 2)
+    var[-3:] = [1700.0, 300.0, 0.0]
+    var *= 1 + np.sqrt(2 / 65536) * rng.standard_normal(var.size)
+    lines = ["exposure_s,kind,mean_dn,var_dn2,pixels", "0.01,dark,100,4,65536"]
+    lines += [f"0.01,flat,{100 + float(s)!r},{float(v)!r},65536" for s, v in zip(sig, var, strict=True)]
+    (tmp_path / "t.csv").write_text("\n".join(lines) + "\n")
+    res = calibrate(tmp_path / "t.csv", tmp_path / "out", chain=False)
+    fit = res["fit"]
+    assert fit["irradiance_kind"] == "none" and not fit["linearized"]
+    assert fit["k_misfit"] and fit["chi2_red_k"] > 3
+    assert fit["k_se"] == pytest.approx(fit["k_se_statistical"] * math.sqrt(fit["chi2_red_k"]), rel=1e-9)
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "does not fit the data within their errors" in report
+    assert f"chi2_red = {fit['chi2_red_k']:.3g}" in report and "Birge" in report
