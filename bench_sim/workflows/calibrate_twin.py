@@ -24,8 +24,9 @@ Effects (``[sensor.effects.<name>]``, :mod:`bench_sim.sensor.effects`):
   camera is significantly non-linear;
 * ``defects`` (``map_file = "defect_map.csv"``): the defect pixels found in the images that lie
   on the twin's sensor (all of them are in ``defects.csv``);
-* ``offset_pattern``: the pixel part of the offset pattern at 0 s (a dark series), its column
-  part as ``column_offset_dn``; ``dsnu_e_s`` the dark current's non-uniformity;
+* ``offset_pattern``: the pixel part of the offset pattern at 0 s (a dark series), where it is
+  significant (3 standard errors); its column part as ``column_offset_dn``; ``dsnu_e_s`` the dark
+  current's non-uniformity;
 * ``row_noise``: the temporal row noise, where it is significant (3 standard errors).
 
 References
@@ -53,6 +54,8 @@ __all__ = ["Twin", "twin_from_fit", "twin_from_results", "FULL_WELL_ABOVE_ADC", 
 #: Where the ADC clips first, the twin's full well lies this much above the charge that reaches
 #: the ADC's top (not measurable; any value above keeps the ADC the clip)
 FULL_WELL_ABOVE_ADC = 1.25
+#: Standard errors from 0 at which an offset pattern or a row noise is carried into the twin
+SIGNIFICANT = 3.0
 #: The twin's files
 RESPONSE_FILE, MAP_FILE, DEFECTS_FILE = "response.csv", "defect_map.csv", "defects.csv"
 #: Points of the response table
@@ -156,7 +159,8 @@ def _from_frames(twin: Twin, an: FrameAnalysis, base: BenchConfig, t_exp: float)
     if split is not None:
         s["dsnu_e_s"] = split["dark_current_nu_e_s"]["total_e_s"]
         s["column_offset_dn"] = split["dsnu0_e"]["column_e"] * k
-        if split["dsnu0_e"]["pixel_e"] > 0:
+        d0 = split["dsnu0_e"]
+        if d0["pixel_e"] > SIGNIFICANT * d0["pixel_se_e"]:  # a pattern the data show
             twin.add_effect(
                 "offset_pattern", {"kind": "offset_pattern", "rms_e": split["dsnu0_e"]["pixel_e"]}
             )
@@ -182,7 +186,7 @@ def _from_frames(twin: Twin, an: FrameAnalysis, base: BenchConfig, t_exp: float)
             f"sensor are its `{MAP_FILE}` (sensor.effects.defects)."
         )
     rn = an.row_noise
-    if rn is not None and rn.var_dn2 > 3.0 * rn.var_se_dn2 and rn.var_dn2 > 0:
+    if rn is not None and rn.var_dn2 > SIGNIFICANT * rn.var_se_dn2 and rn.var_dn2 > 0:
         twin.add_effect("row_noise", {"kind": "row_noise", "rms_dn": math.sqrt(rn.var_dn2)})
 
 
