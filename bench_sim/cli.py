@@ -42,8 +42,8 @@ from bench_sim.io import format_bytes
 from bench_sim.render import record_store
 from bench_sim.runtime.backend import choose_backend, versions
 from bench_sim.runtime.resources import available_memory_bytes
+from bench_sim.workflows import area_ptc_job, config_cmd, mtf_cmd, ptc_job, render_job, simulate_summary
 from bench_sim.workflows import calibrate as calibrate_workflow
-from bench_sim.workflows import config_cmd, mtf_cmd, ptc_job, render_job, simulate_summary
 from bench_sim.workflows import fuse as fuse_workflow
 from bench_sim.workflows import simulate as simulate_workflow
 from bench_sim.workflows.dataset import run as dataset_run
@@ -311,11 +311,10 @@ def ptc(
     stages: Annotated[str, typer.Option("--stages", help="e.g. 1,10,80, 5:100:5 or all")] = "1,10,80",
     seed: SeedOpt = 0,
     out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/ptc"),
+    area: Annotated[bool, typer.Option("--area", help=area_ptc_job.AREA_HELP)] = False,
 ) -> None:
     """Photon-transfer series through the sensor and DTDI: EMVA 1288 files and results."""
-    cfg = load_config(config)
-    chosen = list(simulate_workflow.parse_stages_arg(stages, cfg.sensor.rows))
-    ptc_job.run_ptc(cfg, stages=chosen, seed=seed, out=out)
+    ptc_job.run_ptc_command(load_config(config), stages, seed, out, area=area)
 
 
 @app.command()

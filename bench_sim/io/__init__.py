@@ -24,6 +24,9 @@ Modules
     Measured spectra by name from colour-science, or from CSV files.
 :mod:`~bench_sim.io.emva_descriptor`
     The EMVA 1288 descriptor file.
+:mod:`~bench_sim.io.frame_stacks`
+    Stacks of raw frames of an EMVA 1288 measurement in one ``.npz`` (``ptc --area`` writes it,
+    ``calibrate`` reads it).
 :mod:`~bench_sim.io.folder_lock`
     One writer per output folder: the advisory lock a long run holds on its ``--out``.
 :mod:`~bench_sim.io.interrupts`
@@ -42,6 +45,7 @@ from bench_sim.io.files import (
     write_json,
     write_text,
 )
+from bench_sim.io.frame_stacks import read_frames_npz, write_frames_npz
 from bench_sim.io.images import (
     ImageReadError,
     check_image_file,
@@ -94,6 +98,8 @@ __all__ = [
     "write_csv",
     "read_csv_columns",
     "write_emva_descriptor",
+    "write_frames_npz",
+    "read_frames_npz",
     "read_image",
     "read_image_channel",
     "srgb_to_linear",

@@ -40,6 +40,7 @@ __all__ = [
     "estimate_simulate",
     "estimate_reproduce",
     "estimate_ptc",
+    "estimate_area_ptc",
     "estimate_fuse",
     "estimate_tasks",
 ]
@@ -219,6 +220,15 @@ def estimate_ptc(
     disk = {f"{images} 16-bit TIFF images": images * (img * 2 + 4096), "tables and plots": 2 * MiB}
     hint = f"lower the stages ({s}) or the image size ({lines} x {columns})"
     return ResourceEstimate("ptc", mem, disk, hint)
+
+
+def estimate_area_ptc(rows: int, columns: int, frames: int) -> ResourceEstimate:
+    """``bench-sim ptc --area``: the raw frames (uint16, and float64 stacks while analysed) and
+    the compressed ``frames.npz``."""
+    img = rows * columns
+    mem = {"interpreter and libraries": BASE_PROCESS_BYTES, f"{frames} raw frames": frames * img * (2 + 8)}
+    disk = {"frames.npz": frames * img * 2, "tables and plots": 2 * MiB}
+    return ResourceEstimate("ptc --area", mem, disk, f"use a smaller window than {rows} x {columns}")
 
 
 def estimate_fuse(shape: tuple[int, ...], tra: bool) -> ResourceEstimate:

@@ -19,7 +19,7 @@ read noise, through a monotone non-decreasing response ``r(e)`` [e- -> e-] (poin
 
 Truth: exact, by the quadrature through ``r`` (:class:`~bench_sim.sensor.effects.base.Response`;
 ``linear_dn`` takes its small-signal slope at 0). EMVA 1288: the linearity error LE of the whole
-chain's response (:func:`bench_sim.sensor.linearity.predicted_linearity_error`).
+chain's response (:func:`bench_sim.sensor.response_curve.predicted_linearity_error`).
 
 References
 ----------
@@ -42,8 +42,12 @@ from bench_sim.config.plausible import Typical
 from bench_sim.errors import BenchSimError
 from bench_sim.sensor.effects.base import Effect, EmvaTerm, ReadLaw, Response, State
 from bench_sim.sensor.effects.effect_files import read_response_table
+from bench_sim.sensor.linearity import linearity_error
 
 __all__ = ["EFFECT", "Nonlinearity"]
+
+#: Charge steps of the response's own LE (:meth:`Nonlinearity.emva`)
+_LE_STEPS = 100
 
 
 class NonlinearityParams(BaseModel):
@@ -160,14 +164,27 @@ class Nonlinearity(Effect):
         return law.with_(responses=(*law.responses, resp))
 
     def emva(self, state: State, t_int_s: float) -> list[EmvaTerm]:
+        """The response at the full well, and the LE of the response alone: EMVA 1288's estimator
+        (:func:`bench_sim.sensor.linearity.linearity_error`) on ``r(e)`` at 100 equal steps of
+        the charge up to the full well, saturation at the last (no noise, no other clip; the
+        whole chain's LE on a measurement's levels is
+        :func:`bench_sim.sensor.response_curve.predicted_linearity_error`)."""
         at_fw = float(self._function(np.array([self.fw]))[0])
+        e = np.linspace(self.fw / _LE_STEPS, self.fw, _LE_STEPS)
+        le = linearity_error(e, self._function(e), e, saturation_index=_LE_STEPS - 1)
         return [
             EmvaTerm(
                 "response_at_full_well",
                 at_fw / self.fw,
                 "1",
                 "response at the full well relative to a linear one, r(FW) / FW",
-            )
+            ),
+            EmvaTerm(
+                "response_linearity_error_percent",
+                le.le_percent,
+                "%",
+                "LE of the response alone over 5-95 % of the full well (EMVA 1288's estimator)",
+            ),
         ]
 
 
