@@ -20,7 +20,8 @@ normal ``z`` (the distribution the ``hybrid`` sampler draws, :func:`bench_sim.se
 shot_electrons`), the read noise is integrated in closed form (moments of a two-sided clipped
 normal), and ``z`` by 12-node Gauss-Legendre quadrature on ``[-6.5, 6.5]`` split at the kinks (where the
 electrons reach the full well and where the mean reaches ``0`` and ``T``), so every piece is
-smooth. Rounding (``rint``) is unbiased there (the read's spread covers many DN).
+smooth. Rounding (``rint``) is unbiased there (the read's spread covers many DN); it adds ``1/12``
+DN^2 to the variance with the probability that the read is not pinned to a clip.
 
 Per stage (:func:`clipped_sum_mean`): the sum of ``m`` independent reads has the summed
 cumulants; its clip at ``0`` and ``W`` is taken through the one-term Edgeworth expansion with
@@ -182,21 +183,30 @@ def _z_at(target: np.ndarray, lam: np.ndarray) -> np.ndarray:
     return out
 
 
+def _inside(mu: np.ndarray, sd: float, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``P(lo < Y < hi)``, ``Y ~ N(mu, sd^2)``: where a rounded read is not pinned to a clip (the
+    rounding's ``1/12`` DN^2 is added with this probability; a pinned read does not vary)."""
+    if sd <= 0:
+        return ((mu > lo) & (mu < hi)).astype(np.float64)
+    return _cdf((hi - mu) / sd) - _cdf((lo - mu) / sd)
+
+
 def _full_read_moments(
     mu: np.ndarray, sd: float, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Raw moments of full-well reads ``clip(N(mu, sd^2), lo, hi)``: the normal's own
-    (``mu``, ``mu^2 + sd^2``, ``mu^3 + 3 mu sd^2``) where both clips lie more than
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Raw moments of full-well reads ``clip(N(mu, sd^2), lo, hi)`` and :func:`_inside`: the
+    normal's own (``mu``, ``mu^2 + sd^2``, ``mu^3 + 3 mu sd^2``, 1) where both clips lie more than
     :data:`_FAR_CLIP_SDS` sd away (the clipped tails are below float64's resolution there), else
     :func:`clipped_normal_moments`."""
     far = (hi - mu > _FAR_CLIP_SDS * sd) & (mu - lo > _FAR_CLIP_SDS * sd)
     var = sd * sd
-    m1, m2, m3 = mu.copy(), mu * mu + var, mu * (mu * mu + 3.0 * var)
+    m1, m2, m3, p_in = mu.copy(), mu * mu + var, mu * (mu * mu + 3.0 * var), np.ones(mu.shape)
     if not np.all(far):
         near = ~far
         c1, c2, c3 = clipped_normal_moments(mu[near], sd, lo[near], hi[near])
         m1[near], m2[near], m3[near] = c1, c2, c3
-    return m1, m2, m3
+        p_in[near] = _inside(mu[near], sd, lo[near], hi[near])
+    return m1, m2, m3, p_in
 
 
 def _identity(e: np.ndarray) -> np.ndarray:
@@ -217,14 +227,15 @@ def _electrons_at(response: Response, target: np.ndarray, fw: float) -> np.ndarr
 def _integrate_reads(
     lam: np.ndarray, det_e: np.ndarray, off: np.ndarray, rm: ReadModel, lo: np.ndarray, hi: np.ndarray,
     noisy: bool, response: Response | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Raw moments of the clipped reads ``lam`` (1-D arrays), by quadrature over ``z``; with a
-    monotone ``response`` of the charge (after the full-well clip, before the read noise)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Raw moments of the clipped reads ``lam`` (1-D arrays) and the probability that a read is
+    inside its clips (:func:`_inside`), by quadrature over ``z``; with a monotone ``response`` of
+    the charge (after the full-well clip, before the read noise)."""
     k, fw, s = rm.gain_dn_per_e, rm.full_well_e, rm.gain_dn_per_e * rm.read_noise_e
     r = _identity if response is None else response
     if not noisy or not np.any(lam > 0):
-        e = np.minimum(lam + det_e, fw)
-        return clipped_normal_moments(k * r(e) + off, s, lo, hi)
+        mu = k * r(np.minimum(lam + det_e, fw)) + off
+        return (*clipped_normal_moments(mu, s, lo, hi), _inside(mu, s, lo, hi))
     # reads full at every node (the quantile at -_Z_MAX already reaches the full well; it rises
     # with z where lam is that large): the integrand is constant, the read a clipped normal
     full = lam + det_e >= fw  # (the quantile at -_Z_MAX lies below lam)
@@ -235,11 +246,11 @@ def _integrate_reads(
         m_full = _full_read_moments(k * top_e + off[full], s, lo[full], hi[full])
         rest = ~full
         m_rest = _integrate_reads(lam[rest], det_e[rest], off[rest], rm, lo[rest], hi[rest], noisy,
-                                  response) if np.any(rest) else (np.empty(0),) * 3
-        moments = tuple(np.empty(lam.shape) for _ in range(3))
-        for j in range(3):
+                                  response) if np.any(rest) else (np.empty(0),) * 4
+        moments = tuple(np.empty(lam.shape) for _ in range(4))
+        for j in range(4):
             moments[j][full], moments[j][rest] = m_full[j], m_rest[j]
-        return moments[0], moments[1], moments[2]
+        return moments[0], moments[1], moments[2], moments[3]
     # kinks in z: full well, mean at lo and at hi
     cuts = [_z_at(fw - det_e, lam)]
     if response is None:  # the charge where the mean reaches each clip: a kink without read noise
@@ -248,7 +259,7 @@ def _integrate_reads(
         cuts += [_z_at(_electrons_at(response, (b - off) / k, fw) - det_e, lam) for b in (lo, hi)]
     fixed = [np.full(lam.shape, z) for z in (-_Z_MAX, -_Z_SPLIT, _Z_SPLIT, _Z_MAX)]
     edges = np.sort(np.stack([*fixed, *cuts]), axis=0)
-    acc = [np.zeros(lam.shape) for _ in range(3)]
+    acc = [np.zeros(lam.shape) for _ in range(4)]
     total = np.zeros(lam.shape)
     for p in range(edges.shape[0] - 1):
         a, b = edges[p], edges[p + 1]
@@ -256,11 +267,12 @@ def _integrate_reads(
         z = (0.5 * (a + b))[:, None] + half[:, None] * _GL_X[None, :]
         w = (half[:, None] * _GL_W[None, :]) * _phi(z)
         e = np.minimum(np.maximum(_cf_quantile(z, lam[:, None]), 0.0) + det_e[:, None], fw)
-        mom = clipped_normal_moments(k * r(e) + off[:, None], s, lo[:, None], hi[:, None])
+        mu, lo_n, hi_n = k * r(e) + off[:, None], lo[:, None], hi[:, None]
+        mom = (*clipped_normal_moments(mu, s, lo_n, hi_n), _inside(mu, s, lo_n, hi_n))
         total += w.sum(axis=1)
-        for j in range(3):
+        for j in range(4):
             acc[j] += (w * mom[j]).sum(axis=1)
-    return acc[0] / total, acc[1] / total, acc[2] / total
+    return acc[0] / total, acc[1] / total, acc[2] / total, acc[3] / total
 
 
 def read_cumulants(
@@ -303,7 +315,8 @@ def read_cumulants(
     Returns
     -------
     (kappa_1, kappa_2, kappa_3)
-        Arrays of ``lam_e``'s shape; ``kappa_2`` includes the rounding's ``1/12``.
+        Arrays of ``lam_e``'s shape; ``kappa_2`` includes the rounding's ``1/12`` (where the read
+        is not pinned to a clip: a read at a clip does not vary).
     """
     lam = np.asarray(lam_e, dtype=np.float64, order="C")
     det0, off0 = np.asarray(det_e, dtype=np.float64), np.asarray(offset_dn, dtype=np.float64)
@@ -326,10 +339,11 @@ def read_cumulants(
     if np.any(near):
         det, off = (np.broadcast_to(a, lam.shape)[near] for a in (det0, off0))
         lo, hi = (np.broadcast_to(a, lam.shape)[near] for a in (lo0, hi0))
-        m1, m2, m3 = _integrate_reads(lam[near], det, off, rm, lo, hi, noisy, response)
+        m1, m2, m3, p_in = _integrate_reads(lam[near], det, off, rm, lo, hi, noisy, response)
         c2 = np.maximum(m2 - m1 * m1, 0.0)
         k1[near] = m1
-        k2[near] = c2 + np.where(c2 > 0.0, QUANTIZATION_VAR_DN2 if rm.quantization else 0.0, 0.0)
+        # the rounding's 1/12 where the read is not pinned to a clip (a pinned read does not vary)
+        k2[near] = c2 + np.where(c2 > 0.0, p_in * (QUANTIZATION_VAR_DN2 if rm.quantization else 0.0), 0.0)
         k3[near] = m3 - 3.0 * m1 * m2 + 2.0 * m1**3
     return k1, k2, k3
 

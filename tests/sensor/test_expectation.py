@@ -56,6 +56,21 @@ def test_read_mean_and_variance_match_the_exact_distribution(lam, top, hi):
         assert abs(linear - mean) > 0.5
 
 
+@pytest.mark.parametrize(("lam", "top", "hi"), [
+    (7000.0, 511, None), (7100.0, 511, None), (7200.0, 511, None), (7300.0, 511, None),  # the ADC top
+    (11300.0, 1023, 800.0), (11500.0, 1023, 800.0),  # a word clip folded into the read
+])
+def test_a_read_pinned_to_a_clip_has_the_exact_variance(lam, top, hi):
+    """A read that mostly sits at a clip barely varies: the rounding's 1/12 DN^2 counts only where
+    the read is inside its clips (it was added in full: 0.083 DN^2 where the exact is 0.002)."""
+    rm = ReadModel(K, FW, SIGMA, float(top), True)
+    _, k2, _ = read_cumulants(np.array([lam]), 0.0, B, rm, hi_dn=hi)
+    p = _read_pmf(lam, top)
+    v = np.clip(np.arange(top + 1), 0, hi if hi is not None else top)
+    var = (p * v * v).sum() - (p * v).sum() ** 2
+    assert k2[0] == pytest.approx(var, rel=0.05, abs=2e-3)
+
+
 def test_clipped_normal_moments_against_quadrature():
     x = np.linspace(-30, 30, 600001)
     for mu, sd, lo, hi in [(3.0, 2.0, 0.0, 5.0), (-1.0, 0.5, 0.0, 10.0), (7.0, 3.0, -2.0, 8.0)]:
