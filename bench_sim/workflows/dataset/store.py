@@ -24,6 +24,7 @@ from bench_sim.config import config_sha256, config_to_toml_text
 from bench_sim.errors import BenchSimError
 from bench_sim.io import atomic_path, check_output_dir, umask, write_csv, write_json
 from bench_sim.io.ownership import entries, refuse_foreign, remove_listed
+from bench_sim.pipeline import VARIABLES_BY_NAME
 from bench_sim.version import __version__
 from bench_sim.workflows.dataset.coordinates import constant_attrs, physical_coords, variable_attrs
 from bench_sim.workflows.dataset.reader import (
@@ -41,8 +42,8 @@ from bench_sim.workflows.dataset.reader import (
     variable_meta,
 )
 from bench_sim.workflows.dataset.splits import split_indices, split_of
-from bench_sim.workflows.dataset.targets import strict_json
-from bench_sim.workflows.output_meta import provenance
+from bench_sim.workflows.dataset.targets import EXTRA_FUSED_VARIABLES, EXTRA_STAGE_VARIABLES, strict_json
+from bench_sim.workflows.output_meta import chain_provenance, provenance, store_attrs
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -162,6 +163,13 @@ def _info(spec: DatasetSpec) -> dict[str, Any]:
     }
 
 
+def _is_truth(name: str) -> bool:
+    """A truth variable: one of the pass's (:data:`bench_sim.pipeline.PASS_VARIABLES`) or a
+    dataset-only target computed from them."""
+    var = VARIABLES_BY_NAME.get(name)
+    return (var is not None and var.truth) or name in EXTRA_STAGE_VARIABLES or name in EXTRA_FUSED_VARIABLES
+
+
 def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
     """``dataset.json``, an empty ``data.zarr`` with the whole schema and ``samples/``."""
     import dask.array as da
@@ -181,8 +189,11 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
     }
     ds = xr.Dataset(data, coords=coords)
     ped = float(spec.base.dtdi.pedestal_dn)
+    chain = store_attrs(spec.base)  # sensor_chain, truth_exact (truth_not_exact)
     for name, v in schema.items():
         ds[name].attrs.update(variable_attrs(name, v["units"], v["long_name"], ped))
+        if _is_truth(name):  # says whether it is exact for the sensor's chain, as the pass's do
+            ds[name].attrs.update({k: a for k, a in chain.items() if k.startswith("truth_")})
     for cname, (dim, cvalues, cattrs) in physical_coords(spec.base).items():
         ds.coords[cname] = (dim, cvalues, cattrs)
     ds["sample"].attrs.update(units="1", long_name="sample index (spawn key of its random stream)")
@@ -202,6 +213,7 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
         camera=spec.camera,
         Conventions="CF-1.10",
         **constant_attrs(spec.base),
+        **chain,
     )
     if spec.fused:
         ds.attrs.update(mu1=int(spec.base.fusion.mu1), mu2=int(spec.base.fusion.mu2))
@@ -339,9 +351,11 @@ def _csv_value(v: Any) -> Any:
 
 def manifest_meta(spec: DatasetSpec) -> dict[str, Any]:
     """The provenance of the manifest, the card's thumbnails and the completion record."""
+    chain = chain_provenance(spec.base)
     return {
         "version": __version__, "seed": spec.seed, "config_sha256": config_sha256(spec.base),
-        "spec_sha256": spec.identity(), "dataset": spec.name,
+        "spec_sha256": spec.identity(), "dataset": spec.name, "truth_exact": chain["truth_exact"],
+        **({"truth_not_exact": chain["truth_not_exact"]} if "truth_not_exact" in chain else {}),
     }
 
 

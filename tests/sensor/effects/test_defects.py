@@ -33,10 +33,10 @@ VALUES = {"hot_dark_current_e_s": 5e5, "warm_dark_current_e_s": 5e4, "cold_gain"
 #: a measured map: (row, column, kind, value); row 0 holds each kind twice or more (stage 1 reads
 #: row 0), other rows a few more (stage 80 sums rows 0..79)
 MAP = [
-    (0, 0, "hot", 5e5), (0, 1, "hot", 2e5), (0, 2, "warm", 5e4), (0, 3, "warm", 2e4), (0, 4, "cold", 0.25),
-    (0, 5, "cold", 0.0), (0, 6, "stuck", 300.0), (0, 7, "stuck", 0.0), (0, 8, "rts", 15.0), (0, 9, "rts", 6.0),
-    (0, 10, "rts", 30.0), (7, 3, "hot", 3e5), (20, 11, "cold", 0.5), (33, 12, "rts", 20.0), (51, 14, "warm", 9e4),
-    (79, 15, "stuck", 200.0),
+    (0, 0, "hot", 5e5), (0, 1, "hot", 2e5), (0, 2, "warm", 5e4), (0, 3, "warm", 2e4),
+    (0, 4, "cold", 0.25), (0, 5, "cold", 0.0), (0, 6, "stuck", 300.0), (0, 7, "stuck", 0.0),
+    (0, 8, "rts", 15.0), (0, 9, "rts", 6.0), (0, 10, "rts", 30.0), (7, 3, "hot", 3e5),
+    (20, 11, "cold", 0.5), (33, 12, "rts", 20.0), (51, 14, "warm", 9e4), (79, 15, "stuck", 200.0),
 ]
 
 
@@ -88,7 +88,8 @@ def test_defects_leave_the_default_patterns_and_change_only_their_pixels():
 
 def test_the_map_is_read_exactly(tmp_path):
     """Every listed pixel has its kind and value, and no other pixel is a defect."""
-    sensor = SensorConfig(rows=80, columns=16, effects={"d": {"kind": "defects", "map_file": write_map(tmp_path)}})
+    sensor = SensorConfig(rows=80, columns=16,
+                          effects={"d": {"kind": "defects", "map_file": write_map(tmp_path)}})
     state = dict(draw_fixed_pattern(sensor, np.random.default_rng(0)).effects)["d"]
     code, value = np.asarray(state["code"]), np.asarray(state["value"])
     want_code, want_value = np.zeros((80, 16), dtype=int), np.zeros((80, 16))
@@ -103,13 +104,15 @@ def test_the_map_is_read_exactly(tmp_path):
     ([(0, 1, "hot", float("nan"))], "row 1"),
 ])
 def test_a_bad_map_is_one_line_naming_the_row(tmp_path, rows, message):
-    sensor = SensorConfig(rows=80, columns=16, effects={"d": {"kind": "defects", "map_file": write_map(tmp_path, rows)}})
+    sensor = SensorConfig(rows=80, columns=16,
+                          effects={"d": {"kind": "defects", "map_file": write_map(tmp_path, rows)}})
     with pytest.raises(BenchSimError, match=r"sensor\.effects\.d\.map_file = .*" + message):
         sensor_chain(sensor)
 
 
 def test_a_stuck_value_above_the_adc_top_is_refused():
-    with pytest.raises(BenchSimError, match=r"sensor\.effects\.d\.stuck_value_dn = 600: above the ADC's top \(511 DN\)"):
+    with pytest.raises(BenchSimError,
+                       match=r"sensor\.effects\.d\.stuck_value_dn = 600: above the ADC's top \(511 DN\)"):
         sensor_chain(SensorConfig(adc_bits=9, effects={"d": {"kind": "defects", "stuck_value_dn": 600}}))
 
 
@@ -151,7 +154,8 @@ def test_stage_words_of_the_map_follow_the_truth(tmp_path, clip, stage):
 @pytest.mark.parametrize(("clip", "irradiance"), [("none", 10.0), ("word at stage 80", 25.0)])
 def test_stage_words_at_rates_follow_the_truth(clip, irradiance):
     """Defects drawn at their rates over the 80 rows a stage-80 word sums."""
-    d = draw(clip_cfg({"d": {"kind": "defects", **RATES, **VALUES}}, clip, 80, irradiance=irradiance), [80])[80]
+    effects = {"d": {"kind": "defects", **RATES, **VALUES}}
+    d = draw(clip_cfg(effects, clip, 80, irradiance=irradiance), [80])[80]
     assert_truth(d, clip)
 
 

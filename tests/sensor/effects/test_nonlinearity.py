@@ -74,7 +74,8 @@ def test_polynomial_response():
 
 def test_a_polynomial_that_falls_is_refused():
     """``1 - 0.8 x`` falls beyond ``e = 0.625 FW``."""
-    with pytest.raises(BenchSimError, match=r"sensor\.effects\.p\.coefficients = \[-0\.8\]: the response falls"):
+    with pytest.raises(BenchSimError,
+                       match=r"sensor\.effects\.p\.coefficients = \[-0\.8\]: the response falls"):
         _response({"p": {"kind": "nonlinearity", "form": "polynomial", "coefficients": [-0.8]}})
 
 
@@ -150,7 +151,8 @@ def test_reads_follow_the_truth_from_zero_to_beyond_the_full_well(effect, adc_bi
 
 def test_table_reads_follow_the_truth(tmp_path):
     csv = _table(tmp_path, "0, 0\n2000, 2100\n6000, 5600\n13500, 11000\n")
-    sensor = SensorConfig(rows=4, columns=32, effects={"t": {"kind": "nonlinearity", "form": "table", "table": csv}})
+    effects = {"t": {"kind": "nonlinearity", "form": "table", "table": csv}}
+    sensor = SensorConfig(rows=4, columns=32, effects=effects)
     photons = np.broadcast_to(np.linspace(0.02, 1.2, 32) * FW / sensor.quantum_efficiency, (4, 32)).copy()
     assert_reads_follow_the_truth(expose_reads(sensor, photons, 10000), "table")
 

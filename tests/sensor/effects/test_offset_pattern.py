@@ -24,7 +24,8 @@ pytestmark = pytest.mark.physics
 EFFECT = {"op": {"kind": "offset_pattern", "rms_e": 30.0, "rms_dn": 1.5}}
 
 
-@pytest.mark.parametrize(("rms_e", "rms_dn", "seed"), [(30.0, 0.0, 0), (0.0, 2.0, 1), (30.0, 1.5, 2), (1.5, 0.0, 3)])
+@pytest.mark.parametrize(("rms_e", "rms_dn", "seed"),
+                         [(30.0, 0.0, 0), (0.0, 2.0, 1), (30.0, 1.5, 2), (1.5, 0.0, 3)])
 def test_offsets_are_normal_with_the_rms_in_quadrature(rms_e, rms_dn, seed):
     """On 200 x 150 pixels the sum of squared offsets over ``sigma^2 = (K rms_e)^2 + rms_dn^2``
     lies within the chi-square(30,000) quantiles of 1e-6; the offsets are normal (a

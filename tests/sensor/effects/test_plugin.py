@@ -61,7 +61,8 @@ def user_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def plugin(user_file: Path, function: str, point: str, truth: str = "none", **args: float) -> dict:
-    return {"kind": "plugin", "function": f"{user_file}:{function}", "point": point, "truth": truth, "args": args}
+    return {"kind": "plugin", "function": f"{user_file}:{function}", "point": point, "truth": truth,
+            "args": args}
 
 
 def gamma(user_file: Path) -> dict:
