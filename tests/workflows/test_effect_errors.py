@@ -240,3 +240,23 @@ def test_a_data_set_randomising_a_bad_effect_value_is_one_line(folder, entry, ne
     before = _files(folder)
     assert_one_line(runner.invoke(app, _commands(paths, folder / "out")["dataset"]), *needles)
     assert _files(folder) == before
+
+
+def test_a_sweep_spec_reaches_every_parameter_of_an_effect(folder):
+    """Dotted keys into ``sensor.effects``: a parameter the base leaves at its default, a plug-in's
+    ``args`` entry and ``enabled``; each point's config holds its value (checked, not run)."""
+    from bench_sim.sensor.effects.chain import sensor_chain
+    from bench_sim.workflows.sweep.spec import load_spec
+
+    paths = _write(folder, KNEE + _plugin("user.py:gamma", args="gamma = 0.8").replace("mine", "g"))
+    paths["sweep"].write_text(
+        'base = "bench.toml"\nmode = "sequential"\n'
+        '[[parameters]]\nkey = "sensor.effects.knee.knee_e"\nvalues = [3000.0, 5000.0]\n'
+        '[[parameters]]\nkey = "sensor.effects.g.args.gamma"\nvalues = [0.7, 0.95]\n'
+        '[[parameters]]\nkey = "sensor.effects.knee.enabled"\nvalues = [false]\n')
+    spec = load_spec(paths["sweep"])
+    effects = [p.cfg.sensor.effects for p in spec.points]
+    assert [e["knee"].model_extra.get("knee_e") for e in effects[:2]] == [3000.0, 5000.0]
+    assert [e["g"].model_extra["args"]["gamma"] for e in effects[2:4]] == [0.7, 0.95]
+    assert effects[4]["knee"].enabled is False
+    assert [len(sensor_chain(p.cfg.sensor).effects) for p in spec.points] == [2, 2, 2, 2, 1]

@@ -17,6 +17,9 @@ The checks (pixel ``p``, ``S`` seeds, ``mu_p = mean_dn``, ``sigma_p = noise_std_
   acts the reads are close to normal and every pixel's ``(S - 1) R_p`` also lies within the
   chi-square(S - 1) quantiles of ``1e-3 / P`` (Bonferroni over the ``P`` pixels, valid whatever
   their correlation);
+- where a clip acts, ``linear_dn`` (no clip) is not the truth: on the pixels it touched it would
+  shift the z-scores' mean by more than 10 standard errors (the test sees a truth that ignores
+  the clip);
 - a pixel pinned to a clip or stuck (``sigma_p`` below :data:`PINNED_SD_DN`, under a rounding
   step: what little it varies comes from departures too rare for ``S`` seeds to sample) gives
   ``dn`` within half a DN of ``mu_p`` on average (exactly ``mu_p`` where ``sigma_p = 0``).
@@ -164,12 +167,18 @@ def assert_variance_is_the_truth(d: Draws, what: str, *, normal: bool) -> None:
 
 
 def assert_clip_acts(d: Draws, clip: str) -> None:
-    """The case puts its clip in action (``none``: no clip anywhere)."""
+    """The case puts its clip in action (``none``: no clip anywhere), and the clip shapes the
+    truth: were ``linear_dn`` (no clip) the truth, the mean z-score of the pixels the clip
+    touched would be off by more than 10 standard errors, so the z-scores have the power to see
+    a truth that ignores the clip."""
     frac = float(d.clipped.mean())
     if clip == "none":
         assert frac == 0.0, (clip, frac)
-    else:
-        assert frac >= 0.25, (clip, "the clip does not act", frac)
+        return
+    assert frac >= 0.25, (clip, "the clip does not act", frac)
+    touched = (d.sd >= PINNED_SD_DN) & d.clipped
+    shift = (d.linear - d.mean)[touched] / (d.sd[touched] / np.sqrt(d.seeds))
+    assert abs(shift.mean()) > 10 / np.sqrt(shift.size), (clip, "linear_dn is as good a truth", shift.mean())
 
 
 def assert_truth(d: Draws, clip: str) -> None:
