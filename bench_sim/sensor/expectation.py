@@ -20,8 +20,11 @@ normal ``z`` (the distribution the ``hybrid`` sampler draws, :func:`bench_sim.se
 shot_electrons`), the read noise is integrated in closed form (moments of a two-sided clipped
 normal), and ``z`` by 12-node Gauss-Legendre quadrature on ``[-6.5, 6.5]`` split at the kinks (where the
 electrons reach the full well and where the mean reaches ``0`` and ``T``), so every piece is
-smooth. Rounding (``rint``) is unbiased there (the read's spread covers many DN); it adds ``1/12``
-DN^2 to the variance with the probability that the read is not pinned to a clip.
+smooth; below :data:`~bench_sim.sensor.sampler.SHOT_NOISE_SWITCH_E` mean electrons (where the
+sampler draws the exact Poisson law and the quantile is no longer close to it) ``n`` is summed
+over its counts with the Poisson weights instead. Rounding (``rint``) is unbiased there (the
+read's spread covers many DN); it adds ``1/12`` DN^2 to the variance with the probability that the
+read is not pinned to a clip.
 
 Per stage (:func:`clipped_sum_mean`): the sum of ``m`` independent reads has the summed
 cumulants; its clip at ``0`` and ``W`` is taken through the one-term Edgeworth expansion with
@@ -42,14 +45,18 @@ Math. Soc. 29, 353-380. H. Cramer, Mathematical Methods of Statistics (1946), se
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from bench_sim.sensor.clipped_normal import clipped_normal_moments
+from bench_sim.sensor.clipped_normal import inside_probability as _inside
+from bench_sim.sensor.clipped_normal import normal_cdf as _cdf
+from bench_sim.sensor.clipped_normal import normal_pdf as _phi
 from bench_sim.sensor.cumulant_kernel import linear_cumulants
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2
+from bench_sim.sensor.sampler import SHOT_NOISE_SWITCH_E
 
 #: A monotone response of the charge, electrons -> electrons
 Response = Callable[[np.ndarray], np.ndarray]
@@ -119,45 +126,6 @@ class ReadModel:
         )
 
 
-def _phi(x: np.ndarray) -> np.ndarray:
-    return np.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
-
-
-def _cdf(x: np.ndarray) -> np.ndarray:
-    from scipy.special import ndtr
-
-    return np.asarray(ndtr(x))
-
-
-def clipped_normal_moments(
-    mu: np.ndarray, sd: np.ndarray | float, lo: np.ndarray | float, hi: np.ndarray | float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Raw moments ``E[X^k]``, ``k = 1, 2, 3``, of ``X = clip(Y, lo, hi)``, ``Y ~ N(mu, sd^2)``.
-
-    Partial moments of the normal inside ``(lo, hi)`` by the recursion
-    ``M_k = mu M_{k-1} + sd^2 (k - 1) M_{k-2} - sd (hi^{k-1} phi(beta) - lo^{k-1} phi(alpha))``
-    (``alpha, beta`` the standardised bounds), plus the point masses at the bounds. ``sd = 0``
-    gives ``clip(mu)``.
-    """
-    mu = np.asarray(mu, dtype=np.float64)
-    sd_a = np.broadcast_to(np.asarray(sd, dtype=np.float64), mu.shape)
-    lo_a = np.broadcast_to(np.asarray(lo, dtype=np.float64), mu.shape)
-    hi_a = np.broadcast_to(np.asarray(hi, dtype=np.float64), mu.shape)
-    safe = np.where(sd_a > 0, sd_a, 1.0)
-    a, b = (lo_a - mu) / safe, (hi_a - mu) / safe
-    pa, pb = _phi(a), _phi(b)
-    ca, cb = _cdf(a), _cdf(b)
-    m0 = cb - ca
-    m1 = mu * m0 - safe * (pb - pa)
-    m2 = mu * m1 + safe**2 * m0 - safe * (hi_a * pb - lo_a * pa)
-    m3 = mu * m2 + 2.0 * safe**2 * m1 - safe * (hi_a**2 * pb - lo_a**2 * pa)
-    out = []
-    for k, mk in ((1, m1), (2, m2), (3, m3)):
-        val = mk + lo_a**k * ca + hi_a**k * (1.0 - cb)
-        out.append(np.where(sd_a > 0, val, np.clip(mu, lo_a, hi_a) ** k))
-    return out[0], out[1], out[2]
-
-
 def _cf_quantile(z: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Cornish-Fisher quantile of Poisson(lam) (cumulants all ``lam``), third order."""
     s = np.sqrt(np.maximum(lam, 1e-300))
@@ -181,14 +149,6 @@ def _z_at(target: np.ndarray, lam: np.ndarray) -> np.ndarray:
         hi = np.where(below, hi, mid)
     out[inside] = 0.5 * (lo + hi)
     return out
-
-
-def _inside(mu: np.ndarray, sd: float, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """``P(lo < Y < hi)``, ``Y ~ N(mu, sd^2)``: where a rounded read is not pinned to a clip (the
-    rounding's ``1/12`` DN^2 is added with this probability; a pinned read does not vary)."""
-    if sd <= 0:
-        return ((mu > lo) & (mu < hi)).astype(np.float64)
-    return _cdf((hi - mu) / sd) - _cdf((lo - mu) / sd)
 
 
 def _full_read_moments(
@@ -224,6 +184,49 @@ def _electrons_at(response: Response, target: np.ndarray, fw: float) -> np.ndarr
     return 0.5 * (lo + hi)
 
 
+#: raw moments of reads and the probability that each is inside its clips
+Moments = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+#: counts of the exact Poisson sum: P(N > this) < 1e-20 for every mean below the switch
+_POISSON_COUNTS = np.arange(int(SHOT_NOISE_SWITCH_E + 12.0 * np.sqrt(SHOT_NOISE_SWITCH_E) + 13.0),
+                            dtype=np.float64)
+
+
+def _merge(mask: np.ndarray, part: Moments, rest: Moments) -> Moments:
+    """The moments of the reads of ``mask`` from ``part``, of the others from ``rest``."""
+    out = tuple(np.empty(mask.shape) for _ in range(4))
+    for j in range(4):
+        out[j][mask], out[j][~mask] = part[j], rest[j]
+    return out[0], out[1], out[2], out[3]
+
+
+def _full_reads(lam: np.ndarray, det_e: np.ndarray, off: np.ndarray, rm: ReadModel, lo: np.ndarray,
+                hi: np.ndarray, r: Response) -> Moments:
+    """Reads full at every node: the read is the clipped normal of the full well's response."""
+    top = r(np.full(lam.shape, rm.full_well_e))
+    return _full_read_moments(rm.gain_dn_per_e * top + off, rm.gain_dn_per_e * rm.read_noise_e, lo, hi)
+
+
+def _poisson_reads(lam: np.ndarray, det_e: np.ndarray, off: np.ndarray, rm: ReadModel, lo: np.ndarray,
+                   hi: np.ndarray, r: Response) -> Moments:
+    """Reads of Poisson means below :data:`~bench_sim.sensor.sampler.SHOT_NOISE_SWITCH_E`: the
+    exact sum over the counts ``n`` (Poisson weights; 0 electrons at a mean of 0), in blocks."""
+    from scipy.stats import poisson
+
+    k, fw, s = rm.gain_dn_per_e, rm.full_well_e, rm.gain_dn_per_e * rm.read_noise_e
+    out = tuple(np.empty(lam.shape) for _ in range(4))
+    step = max(1, _BLOCK_ELEMENTS // _POISSON_COUNTS.size)
+    for b in range(0, lam.size, step):
+        p = slice(b, b + step)
+        w = poisson.pmf(_POISSON_COUNTS[None, :], lam[p, None])
+        mu = k * r(np.minimum(_POISSON_COUNTS[None, :] + det_e[p, None], fw)) + off[p, None]
+        lo_p, hi_p = lo[p, None], hi[p, None]
+        mom = (*clipped_normal_moments(mu, s, lo_p, hi_p), _inside(mu, s, lo_p, hi_p))
+        total = w.sum(axis=1)
+        for j in range(4):
+            out[j][p] = (w * mom[j]).sum(axis=1) / total
+    return out[0], out[1], out[2], out[3]
+
+
 def _integrate_reads(
     lam: np.ndarray, det_e: np.ndarray, off: np.ndarray, rm: ReadModel, lo: np.ndarray, hi: np.ndarray,
     noisy: bool, response: Response | None = None,
@@ -241,16 +244,15 @@ def _integrate_reads(
     full = lam + det_e >= fw  # (the quantile at -_Z_MAX lies below lam)
     lowest = _cf_quantile(np.full(int(full.sum()), -_Z_MAX), lam[full])
     full[full] = np.maximum(lowest, 0.0) + det_e[full] >= fw
-    if np.any(full):
-        top_e = fw if response is None else response(np.full(int(full.sum()), fw))
-        m_full = _full_read_moments(k * top_e + off[full], s, lo[full], hi[full])
-        rest = ~full
-        m_rest = _integrate_reads(lam[rest], det_e[rest], off[rest], rm, lo[rest], hi[rest], noisy,
-                                  response) if np.any(rest) else (np.empty(0),) * 4
-        moments = tuple(np.empty(lam.shape) for _ in range(4))
-        for j in range(4):
-            moments[j][full], moments[j][rest] = m_full[j], m_rest[j]
-        return moments[0], moments[1], moments[2], moments[3]
+    # small means: the exact Poisson law (what the hybrid sampler draws there; the quantile is not)
+    small = ~full & (lam < SHOT_NOISE_SWITCH_E)
+    for part, moments_of in ((full, _full_reads), (small, _poisson_reads)):
+        if np.any(part):
+            rest = ~part
+            m_part = moments_of(lam[part], det_e[part], off[part], rm, lo[part], hi[part], r)
+            m_rest = _integrate_reads(lam[rest], det_e[rest], off[rest], rm, lo[rest], hi[rest], noisy,
+                                      response) if np.any(rest) else (np.empty(0),) * 4
+            return _merge(part, m_part, m_rest)
     # kinks in z: full well, mean at lo and at hi
     cuts = [_z_at(fw - det_e, lam)]
     if response is None:  # the charge where the mean reaches each clip: a kink without read noise
@@ -379,7 +381,8 @@ def _smooth_response_reads(
         e = (lam_s + _GH_A) + root * _GH_X + _GH_B / root
     else:
         e = lam_s
-    y = k * response(e + det_s) + off_s
+    # the far nodes (beyond CLIP_SIGMAS, weights < 1e-9) may leave 0 .. FW: the response gets charge
+    y = k * response(np.clip(e + det_s, 0.0, rm.full_well_e)) + off_s
     w = _GH_W if noisy else np.ones(1)
     mean = (y * w).sum(axis=1)
     d = y - mean[:, None]  # central moments: the normal read noise adds s^2 and no skew

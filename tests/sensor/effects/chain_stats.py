@@ -221,10 +221,16 @@ def expose_reads(sensor: SensorConfig, photons: np.ndarray, frames: int, *, seed
                             for f0 in range(0, frames, 512)])
     law = sensor_chain(sensor).law(dict(fp.effects))
     rm = law_read_model(sensor, law)
-    lam = sensor.quantum_efficiency * fp.prnu_gain * photons + fp.dark_current_e_s * t_int_s
+    light = sensor.quantum_efficiency * fp.prnu_gain * photons
+    dark = fp.dark_current_e_s * t_int_s
+    # the Poisson part and the part without noise (a source whose shot noise is switched off)
+    if sensor.shot_noise == sensor.dark_noise:
+        lam, det = light + dark, np.zeros(light.shape)
+    else:
+        lam, det = (light, dark) if sensor.shot_noise else (dark, light)
     offset = sensor.black_offset_dn + fp.column_offset_dn + (0.0 if fp.offset_dn is None else fp.offset_dn)
-    k1, k2, _ = law_read_cumulants(lam, 0.0, np.broadcast_to(offset, lam.shape), rm, law,
-                                   slice(0, lam.shape[0]), noisy=True)
+    k1, k2, _ = law_read_cumulants(lam, det, np.broadcast_to(offset, lam.shape), rm, law,
+                                   slice(0, lam.shape[0]), noisy=sensor.shot_noise or sensor.dark_noise)
     return Reads(reads, k1, k2)
 
 

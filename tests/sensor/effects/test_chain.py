@@ -1,14 +1,23 @@
 """A chain of every effect at once: the same words and truth with 1 and 2 threads, its exact truth
-when composed (statistical test), and ``enabled = false`` leaving an effect out."""
+when composed (statistical tests, with each source of noise switched off too), and
+``enabled = false`` leaving an effect out."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from bench_sim.config import SensorConfig
 from bench_sim.pipeline import run_pass
 from bench_sim.sensor.effects.chain import sensor_chain
-from tests.sensor.effects.chain_stats import assert_truth, clip_cfg, draw, flat_cfg
+from tests.sensor.effects.chain_stats import (
+    assert_reads_follow_the_truth,
+    assert_truth,
+    clip_cfg,
+    draw,
+    expose_reads,
+    flat_cfg,
+)
 
 pytestmark = pytest.mark.physics
 
@@ -64,3 +73,21 @@ def test_a_disabled_effect_is_left_out(tmp_path):
     b = run_pass(flat_cfg({}, 100.0, columns=4, lines=4), [1, 8], 2).dataset
     for name in ("dn", "mean_dn", "noise_std_dn"):
         assert np.array_equal(a[name].values, b[name].values), name
+
+
+@pytest.mark.parametrize("switches", [
+    {}, {"dark_noise": False}, {"quantization": False}, {"shot_noise": False}, {"read_noise": False},
+    {"shot_noise": False, "dark_noise": False},
+], ids=lambda s: ",".join(f"{k}={v}" for k, v in s.items()) or "all on")
+def test_every_effect_with_the_pixel_models_switches(switches):
+    """10,000 reads per pixel of 4 x 64 pixels with every built-in effect (half the pixels
+    defects, dead ones too) from 0 electrons (dark pixels: the exact Poisson law of small means)
+    to 125 % of the full well, with a source of noise switched off: the truth's mean and variance
+    (chain_stats)."""
+    effects = {**EXACT, "pixels": {**EXACT["pixels"], "hot_rate": 0.1, "warm_rate": 0.1, "cold_rate": 0.1,
+                                   "cold_gain": 0.0, "stuck_rate": 0.1, "rts_rate": 0.1}}
+    sensor = SensorConfig(rows=4, columns=64, effects=effects, **switches)
+    small = [0.0, 0.5, 2.0, 8.0, 20.0, 40.0]
+    electrons = np.concatenate([small, np.linspace(0.01, 1.25, 58) * sensor.full_well_e])
+    photons = np.broadcast_to(electrons / sensor.quantum_efficiency, (4, 64)).copy()
+    assert_reads_follow_the_truth(expose_reads(sensor, photons, 10000), str(switches))
