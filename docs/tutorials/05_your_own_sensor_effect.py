@@ -74,7 +74,7 @@ def dust(y, *, rng, depth_dn, columns):
 Path("my_camera.toml").write_text('''
 base = "start/paper_rig.toml"
 name = "my_camera"
-lines = 256
+lines = 128
 
 [sensor]
 rows = 40
@@ -134,7 +134,7 @@ assert message.startswith("bench-sim: error: sensor.effects.gamma") and not Path
 # ## Simulate, and check that the truth is exact
 #
 # Stages 1 and 40. On a uniform panel every line of a stage is a new draw of the same pixels, so
-# the z-scores `(dn - mean_dn) / noise_std_dn` of all 256 x 32 words of a stage must have mean 0
+# the z-scores `(dn - mean_dn) / noise_std_dn` of all 128 x 32 words of a stage must have mean 0
 # and variance 1 if `mean_dn` and `noise_std_dn` are the exact expectation and noise of `dn`
 # through the gamma curve. `linear_dn`, the linear camera, is something else: the curve lifts the
 # dark end (its slope at 0 is steep) and compresses the bright end.
