@@ -35,21 +35,21 @@ NOISE = "def noise(y, *, rng, rms_dn):\n    return y + rms_dn * rng.standard_nor
 
 
 def test_every_effect_draws_the_same_with_one_and_two_threads(tmp_path, monkeypatch):
-    """Words and truth of a 60-line pass (stages 1, 8 and 80: 139 frames, several chunks of
+    """Words and truth of a 40-line pass (stages 1, 8 and 40: 79 frames, five chunks of 16
     frames) with every effect and a plug-in drawing from its rng: identical with
     ``BENCH_SIM_THREADS`` 1 and 2."""
     (tmp_path / "noise.py").write_text(NOISE)
     effects = {**EXACT, "flicker": {"kind": "plugin", "function": f"{tmp_path / 'noise.py'}:noise",
                                     "point": "analog", "args": {"rms_dn": 1.5}}}
-    cfg = flat_cfg(effects, 150.0, columns=12, lines=60)
+    cfg = flat_cfg(effects, 150.0, columns=12, lines=40)
     got = []
     for threads in ("1", "2"):
         monkeypatch.setenv("BENCH_SIM_THREADS", threads)
-        got.append(run_pass(cfg, [1, 8, 80], 11).dataset)
+        got.append(run_pass(cfg, [1, 8, 40], 11).dataset)
     one, two = got
     for name in ("dn", "mean_dn", "linear_dn", "noise_std_dn", "clipped"):
         assert np.array_equal(one[name].values, two[name].values), name
-    plain = run_pass(flat_cfg({}, 150.0, columns=12, lines=60), [1, 8, 80], 11).dataset
+    plain = run_pass(flat_cfg({}, 150.0, columns=12, lines=40), [1, 8, 40], 11).dataset
     assert not np.array_equal(one.dn.values, plain.dn.values)  # the effects act
 
 
