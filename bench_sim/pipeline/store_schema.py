@@ -123,10 +123,7 @@ def pass_attrs(
         t_int_s=float(setup.geom.t_int_s),
         frames=int(setup.frames),
     )
-    chain = sensor_chain(cfg.sensor).provenance()
-    attrs.update(sensor_chain="\n".join(chain["sensor_chain"]), truth_exact=int(chain["truth_exact"]))
-    if "truth_not_exact" in chain:
-        attrs["truth_not_exact"] = "; ".join(chain["truth_not_exact"])
+    attrs.update(sensor_chain(cfg.sensor).attrs())  # sensor_chain, truth_exact (truth_not_exact)
     if isinstance(seed, np.random.SeedSequence):
         attrs.update(seed_entropy=str(seed.entropy), seed_spawn_key=str(list(seed.spawn_key)))
     attrs.update(constant_attrs(cfg))

@@ -33,7 +33,6 @@ import numpy as np
 from bench_sim.config import SensorConfig
 from bench_sim.sensor.effects.base import ReadLaw
 from bench_sim.sensor.expectation import ReadModel, read_cumulants
-from bench_sim.sensor.model import QUANTIZATION_VAR_DN2
 
 __all__ = ["law_read_model", "law_read_cumulants", "linear_maps", "stage_constant_dn"]
 
@@ -47,10 +46,10 @@ def law_read_model(sensor: SensorConfig, law: ReadLaw) -> ReadModel:
     return ReadModel(rm.gain_dn_per_e, rm.full_well_e, read_e, rm.top_dn, rm.quantization)
 
 
-def _raw(k1: np.ndarray, k2: np.ndarray, k3: np.ndarray, q: float) -> tuple[np.ndarray, ...]:
-    """Raw moments from cumulants (``k2`` holding the rounding's ``q`` where it is not 0)."""
-    c2 = np.where(k2 > 0, k2 - q, 0.0)
-    return k1, c2 + k1 * k1, k3 + 3.0 * k1 * c2 + k1**3
+def _raw(k1: np.ndarray, k2: np.ndarray, k3: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Raw moments of a read from its cumulants (the rounding's variance in ``k2``: the moments of
+    the rounded read, which mix exactly)."""
+    return k1, k2 + k1 * k1, k3 + 3.0 * k1 * k2 + k1**3
 
 
 def _rows(a: np.ndarray, rows: slice | int) -> np.ndarray:
@@ -87,7 +86,6 @@ def law_read_cumulants(
     k1, k2, k3 = read_cumulants(
         lam, det, offset_dn, rm, noisy=noisy, lo_dn=lo_dn, hi_dn=hi_dn, out=out, response=response
     )
-    q = QUANTIZATION_VAR_DN2 if rm.quantization else 0.0
     shape = np.shape(lam)
     hi = rm.top_dn if hi_dn is None else hi_dn
     if law.telegraph is not None:
@@ -99,16 +97,14 @@ def law_read_cumulants(
             ]
             amp = np.broadcast_to(_rows(tel.amplitude_dn, rows), shape)[sel]
             p = np.broadcast_to(_rows(tel.probability, rows), shape)[sel]
-            base = _raw(k1[sel], k2[sel], k3[sel], q)
+            base = _raw(k1[sel], k2[sel], k3[sel])
             on = _raw(
                 *read_cumulants(
                     pick[0], pick[1], pick[2] + amp, rm, noisy=noisy, lo_dn=lo_dn, hi_dn=hi, response=response
-                ),
-                q,
+                )
             )
             m1, m2, m3 = ((1.0 - p) * b + p * o for b, o in zip(base, on, strict=True))
-            c2 = np.maximum(m2 - m1 * m1, 0.0)
-            k1[sel], k2[sel] = m1, c2 + np.where(c2 > 0, q, 0.0)
+            k1[sel], k2[sel] = m1, np.maximum(m2 - m1 * m1, 0.0)
             k3[sel] = m3 - 3.0 * m1 * m2 + 2.0 * m1**3
     if law.stuck is not None:
         sel = np.broadcast_to(_rows(law.stuck.mask, rows), shape)

@@ -33,7 +33,7 @@ from bench_sim.config.plausible import judge
 from bench_sim.errors import BenchSimError
 from bench_sim.sensor.effects.base import Effect, EmvaTerm, PixelMaps, ReadLaw, State
 
-__all__ = ["SensorChain", "sensor_chain", "effect_kinds", "effect_class", "DEFAULT_CHAIN"]
+__all__ = ["SensorChain", "sensor_chain", "effect_kinds", "effect_class", "DEFAULT_CHAIN", "chain_attrs"]
 
 #: The default chain, EMVA 1288's linear model, in signal order (:mod:`bench_sim.sensor.emva`)
 DEFAULT_CHAIN = (
@@ -151,6 +151,21 @@ class SensorChain:
         if self.not_exact:
             meta["truth_not_exact"] = self.not_exact
         return meta
+
+    def attrs(self) -> dict[str, Any]:
+        """:meth:`provenance` as the attributes of a netCDF or Zarr store (:func:`chain_attrs`)."""
+        return chain_attrs(self.provenance())
+
+
+def chain_attrs(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """A chain's provenance (:meth:`SensorChain.provenance`) as the attributes of a netCDF or Zarr
+    store: ``sensor_chain`` (one step per line), ``truth_exact`` (1 or 0) and, when it is 0,
+    ``truth_not_exact`` (the reasons, ``; ``-separated)."""
+    attrs: dict[str, Any] = {"sensor_chain": "\n".join(meta["sensor_chain"])}
+    attrs["truth_exact"] = int(meta["truth_exact"])
+    if meta.get("truth_not_exact"):
+        attrs["truth_not_exact"] = "; ".join(meta["truth_not_exact"])
+    return attrs
 
 
 def _build(sensor: SensorConfig) -> SensorChain:

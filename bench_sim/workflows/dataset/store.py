@@ -34,7 +34,6 @@ from bench_sim.pipeline import (
     store_chunks,
     variable_attrs,
 )
-from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.version import __version__
 from bench_sim.workflows.dataset.reader import (
     COMPLETION_RECORD,
@@ -51,7 +50,7 @@ from bench_sim.workflows.dataset.reader import (
 )
 from bench_sim.workflows.dataset.splits import SPLIT_RULE, split_map, split_sizes
 from bench_sim.workflows.dataset.targets import strict_json
-from bench_sim.workflows.output_meta import provenance
+from bench_sim.workflows.output_meta import chain_provenance, provenance, store_attrs
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -199,7 +198,6 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
     ds["sample"].attrs.update(units="1", long_name="sample index (spawn key of its random stream)")
     for cname, cattrs in COORD_ATTRS.items():
         ds[cname].attrs.update(cattrs)
-    chain = sensor_chain(base.sensor).provenance()
     ds.attrs.update(
         title=f"bench_sim dataset {spec.name}",
         seed=spec.seed,
@@ -212,9 +210,8 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
         complete_samples="see samples/*.json records (status complete) or the manifest",
         camera=spec.camera,
         Conventions="CF-1.10",
-        sensor_chain="\n".join(chain["sensor_chain"]),
-        truth_exact=int(chain["truth_exact"]),
         **constant_attrs(base),
+        **store_attrs(base),
     )
     if spec.fused:
         ds.attrs.update(mu1=int(base.fusion.mu1), mu2=int(base.fusion.mu2))
@@ -372,9 +369,11 @@ def _csv_value(v: Any) -> Any:
 
 def manifest_meta(spec: DatasetSpec) -> dict[str, Any]:
     """The provenance of the manifest, the card's thumbnails and the completion record."""
+    chain = chain_provenance(spec.base)
     return {
         "version": __version__, "seed": spec.seed, "config_sha256": config_sha256(spec.base),
-        "spec_sha256": spec.identity(), "dataset": spec.name,
+        "spec_sha256": spec.identity(), "dataset": spec.name, "truth_exact": chain["truth_exact"],
+        **({"truth_not_exact": chain["truth_not_exact"]} if "truth_not_exact" in chain else {}),
     }
 
 

@@ -104,8 +104,8 @@ class SweepSummary:
 
 def _value_of(cfg: BenchConfig, key: str) -> Any:
     cur: Any = cfg
-    for part in key.split("."):
-        cur = getattr(cur, part)
+    for part in key.split("."):  # sections and fields; named entries (sensor.effects.<name>) by key
+        cur = cur[part] if isinstance(cur, dict) else getattr(cur, part)
     return list(cur) if isinstance(cur, tuple) else cur
 
 
@@ -135,6 +135,7 @@ def _meta(
     return provenance(
         plan.spec.base,
         plan.spec.seed,
+        covers=[p.cfg for p in plan.spec.points],  # truth_exact only where every point's truth is
         kind="sweep",
         status=status,
         spec=plan.spec.as_dict(),

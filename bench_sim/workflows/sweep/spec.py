@@ -54,7 +54,7 @@ import itertools
 import json
 import math
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
@@ -65,6 +65,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, model_validator
 from bench_sim.config import (
     BenchConfig,
     ConfigError,
+    EffectEntry,
     config_from_dict,
     config_to_toml_dict,
     load_config,
@@ -74,6 +75,7 @@ from bench_sim.config import (
     with_overrides,
 )
 from bench_sim.errors import BenchSimError
+from bench_sim.sensor.effects.chain import effect_kinds
 from bench_sim.workflows.preflight import SEED_RULE, is_seed
 from bench_sim.workflows.sweep.light_keys import LIGHTING_KEYS, adds_light, check_banding_stages, check_ratio
 
@@ -233,15 +235,26 @@ def _err(spec: Path, msg: str) -> BenchSimError:
 
 def key_exists(cfg: BenchConfig, key: str) -> bool:
     """True when the dotted ``key`` names a setting of ``cfg`` (a field of a section, of a light
-    defined in it, or a top-level field)."""
+    defined in it, or a top-level field; a parameter of an effect of ``sensor.effects``, set in
+    ``cfg`` or left at its default, e.g. ``sensor.effects.knee.compression``)."""
     cur: Any = cfg
     for part in key.split("."):
+        if isinstance(cur, Mapping):  # a table of named entries (sensor.effects, a plug-in's args)
+            if part not in cur:
+                return False
+            cur = cur[part]
+            continue
         if not isinstance(cur, BaseModel):
             return False
         extra = cur.__pydantic_extra__ or {}
-        if part not in type(cur).model_fields and part not in extra:
+        if part in type(cur).model_fields or part in extra:
+            cur = getattr(cur, part)
+        elif isinstance(cur, EffectEntry) and cur.kind in effect_kinds():
+            if part not in effect_kinds()[cur.kind].Params.model_fields:
+                return False
+            cur = None  # the effect's parameter at its default: nothing below it
+        else:
             return False
-        cur = getattr(cur, part)
     return True
 
 
