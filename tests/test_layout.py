@@ -138,7 +138,7 @@ FILE_SUFFIXES = {"py", "toml", "md", "json", "csv", "png", "zarr", "nc", "tiff",
 #: libraries whose dotted names the docs quote (checked when installed)
 LIBRARIES = {"numpy", "pandas", "xarray", "torch", "dask", "os", "scipy", "zarr", "mitsuba", "drjit"}
 #: dotted names in the docs that are notation, not code or config (EMVA 1288's symbols)
-NOTATION = {"mu_e.sat", "mu_p.sat"}
+NOTATION = {"mu_e.sat", "mu_p.sat", "mu_y.dark", "sigma_y.dark"}  # EMVA 1288 symbols
 _SPAN = re.compile(r"`([^`\n]+)`")
 _FENCE = re.compile(r"^```.*?^```", re.M | re.S)
 _DOTTED = re.compile(r"(?<![\w./-])([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+)(?![\w/])")
@@ -151,6 +151,16 @@ def _config_names() -> set[str]:
     return keys | {".".join(k.split(".")[:i]) for k in keys for i in range(1, k.count(".") + 1)}
 
 
+def _effect_key_ok(name: str) -> bool:
+    """``sensor.effects.<name>.<key>``: a key of some sensor effect (``bench-sim config keys sensor``)."""
+    from bench_sim.workflows.config_cmd import effect_keys
+
+    parts = name.split(".")
+    if len(parts) != 4 or parts[:2] != ["sensor", "effects"]:
+        return False
+    return parts[3] in {k.key.rsplit(".", 1)[1] for k in effect_keys()}
+
+
 def _dotted_name_ok(name: str, config: set[str]) -> bool:
     """A dotted name of the docs, with or without ``bench_sim.``: a module or attribute of bench_sim
     (``workflows.dataset.splits.split_of`` as well), a config key or table, a file name, a
@@ -158,7 +168,7 @@ def _dotted_name_ok(name: str, config: set[str]) -> bool:
     if name.startswith("bench_sim."):
         return _resolves(name)
     first, last = name.split(".")[0], name.rsplit(".", 1)[1]
-    if last.lower() in FILE_SUFFIXES or name in config or name in NOTATION:
+    if last.lower() in FILE_SUFFIXES or name in config or name in NOTATION or _effect_key_ok(name):
         return True
     if first in LIBRARIES:
         return _resolves(name) or importlib.util.find_spec(first) is None
@@ -171,6 +181,8 @@ def _dotted_name_ok(name: str, config: set[str]) -> bool:
     ("bench_sim.runtime.execution.no_such_name", False),
     ("lights.strong.irradiance_w_m2", True),
     ("lights.strong.flux", False),
+    ("sensor.effects.knee.compression", True),  # a key of a sensor effect
+    ("sensor.effects.knee.flux", False),
     ("manifest.csv", True),
     ("numpy.random.no_such_name", False),
 ])

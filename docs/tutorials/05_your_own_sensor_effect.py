@@ -36,7 +36,8 @@ def bench_sim(*args: str, check: bool = True) -> str:
     return done.stdout + done.stderr
 
 
-print(bench_sim("init", "start"))
+if not Path("start").is_dir():  # the tutorials run one after another in one folder: init once
+    print(bench_sim("init", "start"))
 
 # %% [markdown]
 # ## The effects, in a file of yours
