@@ -1,0 +1,158 @@
+"""The plots of a design (``DIR/plots/``).
+
+``pareto.png``
+    Every candidate's closed-form DR against its RMS error against the true HDR target, coloured
+    by the share of its pixels taken from a clipped stage; the Pareto front ringed, the
+    recommended design, the runner-up and the configured pair marked.
+``heatmap_<objective>.png``
+    Each reported objective over the stage pairs (``mu1`` across, ``mu2`` up), one panel per
+    rule, at the recommended design's point and word (the first point and the pass's word when
+    none is feasible).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench_sim.io import write_figure_png
+from bench_sim.workflows.design.objectives import OBJECTIVES, Choice
+from bench_sim.workflows.design.table import DesignTable
+
+__all__ = ["plot_pareto", "plot_heatmaps", "DPI"]
+
+#: resolution of the plots [dots per inch]
+DPI = 90
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_pareto(out: Path, table: DesignTable, choice: Choice, meta: Mapping[str, Any]) -> str:
+    """``plots/pareto.png`` (module docstring); returns its name."""
+    plt = _pyplot()
+    c = table.columns
+    x = np.asarray(c["truth_rms"], dtype=np.float64)
+    y = np.asarray(c["dr_db"], dtype=np.float64)
+    share = np.asarray(c["clipped_share"], dtype=np.float64)
+    fig, ax = plt.subplots(figsize=(7.0, 4.6), dpi=DPI)
+    ok = np.isfinite(x) & np.isfinite(y) & (x > 0)
+    sc = ax.scatter(
+        x[ok],
+        y[ok],
+        c=share[ok],
+        s=6,
+        cmap="viridis",
+        vmin=0.0,
+        vmax=max(float(np.nanmax(share)) if share.size else 0.0, 1e-6),
+        alpha=0.7,
+        linewidths=0,
+    )
+    front = ok & choice.front
+    ax.scatter(
+        x[front],
+        y[front],
+        s=40,
+        facecolors="none",
+        edgecolors="k",
+        linewidths=0.8,
+        label="Pareto front (DR, truth RMS, clipped share)",
+    )
+    marks = (
+        ("recommended", choice.recommended, "*", "C3"),
+        ("runner-up", choice.runner_up, "D", "C1"),
+        ("configured pair", choice.reference, "s", "C0"),
+    )
+    for label, i, marker, color in marks:
+        if i is not None and ok[i]:
+            ax.scatter(
+                [x[i]],
+                [y[i]],
+                marker=marker,
+                s=120,
+                color=color,
+                edgecolors="k",
+                label=f"{label}: {c['stages'][i]} {c['rule'][i]} {c['beta_bits'][i]}-bit",
+            )
+    if ok.any():
+        ax.set_xscale("log")
+    ax.set_xlabel("RMS relative error against the true HDR target (whole image)")
+    ax.set_ylabel("DR of Gamma_HDR, closed form [dB]")
+    fig.colorbar(sc, ax=ax, label="share of pixels from a clipped stage")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(f"{len(table)} candidates: DR against truth error", fontsize=10)
+    fig.tight_layout()
+    write_figure_png(out / "plots" / "pareto.png", fig, dict(meta, figure="Pareto front"), dpi=DPI)
+    return "plots/pareto.png"
+
+
+def _grid(table: DesignTable, sel: np.ndarray, objective: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The objective over (mu1, mu2) of the selected pairs: stages across, stages up, values."""
+    c = table.columns
+    lows = np.unique(c["mu1"][sel])
+    highs = np.unique(c["mu2"][sel])
+    grid = np.full((highs.size, lows.size), np.nan)
+    li = {int(m): k for k, m in enumerate(lows)}
+    hi = {int(m): k for k, m in enumerate(highs)}
+    for i in np.flatnonzero(sel):
+        grid[hi[int(c["mu2"][i])], li[int(c["mu1"][i])]] = float(c[objective][i])
+    return lows, highs, grid
+
+
+def plot_heatmaps(
+    out: Path, table: DesignTable, choice: Choice, objectives: Sequence[str], meta: Mapping[str, Any]
+) -> list[str]:
+    """``plots/heatmap_<objective>.png`` per objective (module docstring); returns their names."""
+    plt = _pyplot()
+    c = table.columns
+    at = choice.recommended if choice.recommended is not None else 0
+    point, beta = (
+        int(c["point"][at]),
+        int(c["beta_bits"][at]) if choice.recommended is not None else int(np.max(c["beta_bits"])),
+    )
+    rules = list(dict.fromkeys(str(r) for r in c["rule"]))
+    names = []
+    for obj in objectives:
+        o = OBJECTIVES[obj]
+        fig, axes = plt.subplots(1, len(rules), figsize=(3.6 * len(rules) + 0.8, 3.6), dpi=DPI, squeeze=False)
+        for ax, rule in zip(axes[0], rules, strict=True):
+            sel = (c["point"] == point) & (c["beta_bits"] == beta) & (c["rule"] == rule) & (c["mu_mid"] == 0)
+            if not sel.any():
+                ax.set_axis_off()
+                continue
+            lows, highs, grid = _grid(table, sel, obj)
+            im = ax.imshow(
+                grid,
+                origin="lower",
+                aspect="auto",
+                interpolation="nearest",
+                cmap="viridis",
+                extent=(lows[0] - 0.5, lows[-1] + 0.5, highs[0] - 0.5, highs[-1] + 0.5),
+            )
+            fig.colorbar(im, ax=ax, label=f"{obj} [{o.units}]")
+            if choice.recommended is not None and str(c["rule"][at]) == rule and not c["mu_mid"][at]:
+                ax.plot([c["mu1"][at]], [c["mu2"][at]], "r*", ms=10)
+            ax.set_xlabel("mu1 (low stage)")
+            ax.set_ylabel("mu2 (high stage)")
+            ax.set_title(
+                f"{rule}, {beta}-bit "
+                f"({'higher' if o.direction == 'max' else 'lower' if o.direction == 'min' else 'nearer 0'} "
+                "is better)",
+                fontsize=8,
+            )
+        fig.suptitle(f"{obj} over the stage pairs, point {point}", fontsize=10)
+        fig.tight_layout()
+        name = f"plots/heatmap_{obj}.png"
+        write_figure_png(out / name, fig, dict(meta, figure=f"heat map of {obj}"), dpi=DPI)
+        names.append(name)
+    return names
