@@ -183,8 +183,10 @@ def _stacks(cfg: BenchConfig, ds: xr.Dataset, stages: Sequence[int]) -> _Stacks:
     if missing:
         raise BenchSimError(f"score_candidates: the pass has no stage {missing[0]} (its stages: {have})")
 
+    whole = have == list(stages)  # the pass's own arrays, no copy
+
     def flat(name: str, dtype: Any = None) -> np.ndarray:
-        v = ds[name].sel(stage=list(stages)).values
+        v = ds[name].values if whole else ds[name].sel(stage=list(stages)).values
         return np.ascontiguousarray(v.reshape(len(stages), -1), dtype=dtype)
 
     st = np.asarray(stages, dtype=np.int64)

@@ -68,70 +68,84 @@ _N = len(REGIONS)
 #: Phi_FS - o_top, out
 _F2, _B2 = "float64[:, ::1]", "boolean[:, ::1]"
 _I1, _F1 = "int64[::1]", "float64[::1]"
-_SIGNATURE = (f"void({_F2}, {_F2}, {_B2}, {_B2}, {_B2}, {_F2}, {_B2}, {_B2}, int64, {_I1}, {_I1}, {_F1}, "
-              f"{_I1}, {_F2}, float64, float64, float64[:, :, ::1])")
+_SIGNATURE = (f"void({_F2}, {_F2}, {_B2}, {_B2}, {_B2}, {_F2}, {_I1}, {_F2}, {_I1}, int64, {_I1}, "
+              f"{_I1}, {_F1}, {_I1}, {_F2}, float64, float64, float64[:, :, ::1])")
 _DARK_SIGNATURE = (f"void({_F2}, {_F2}, {_I1}, {_F2}, int64, {_I1}, {_I1}, {_F1}, {_I1}, {_F2}, float64, "
                    "float64[:, :, ::1])")
 
 
-def _sums_loop(S: Any, T: Any, VALID: Any, CLIP: Any, CLEAR: Any, PHR: Any, SPOT: Any, FILL: Any, top: int,
-               lows: Any, mids: Any, mst: Any, codes: Any, sat: Any, phi_off_top: float, tol: float,
+def _sums_loop(S: Any, T: Any, VALID: Any, CLIP: Any, CLEAR: Any, PHR: Any, LIGHT: Any, ETOP: Any, ALIKE: Any,
+               top: int, lows: Any, mids: Any, mst: Any, codes: Any, sat: Any, phi_off_top: float, tol: float,
                out: Any) -> None:
     # the loop numba compiles (LOOPS[0]); see fusion_sums. The rule's choice of a stage k: eq. 11
     # the low stage where s_l mu_t > (Phi_FS - o_t) mu_l, else the top; the others the highest
-    # stage below its level. The error goes to "whole", to "spot" or "fill", to "spot_edge" and to
-    # one clearance class (bins 4-6: every stage clear, some, none), summed into the regions last
-    m_t = mst[top]
-    acc = np.zeros((codes.size, 3, 7))  # rule, (n, sum, sumsq), bin
-    cnt = np.zeros((codes.size, 3))  # rule: from a clipped stage, from the low stage, from the middle
+    # stage below its level. The error goes to bin 0 ("whole"), 1 or 2 ("spot", "fill", LIGHT), 3
+    # ("spot_edge") and one clearance class (4-6: every stage clear, some, none), summed into the
+    # regions last: a[rule, 3 bin + (n, sum, sumsq)], then 21-23 the counts. Where every rule
+    # takes one stage with one value it is added once, to row n_r: ALIKE 0 where every rule but
+    # eq. 11 takes the top stage with eq. 11's value, 1 where none does, 2 otherwise; ETOP: the top
+    # stage's error as eq. 11 takes it (s_t) and as the others do ((s_t mu_t) / mu_t).
+    n_r, m_t, eq11 = codes.size, mst[top], (codes == 0).any()
+    acc = np.zeros((lows.size, n_r + 1, 24))
     for j in range(lows.size):
-        il, im, m_l = lows[j], mids[j], mst[lows[j]]
+        il, im, m_l, a = lows[j], mids[j], mst[lows[j]], acc[j]
         c = phi_off_top * m_l
-        acc[:] = 0.0
-        cnt[:] = 0.0
         for p in range(S.shape[1]):
-            s_l, s_t = S[il, p], S[top, p]
-            s_m = S[im, p] if im >= 0 else 0.0
-            light = 1 if SPOT[top, p] else (2 if FILL[top, p] else 0)
-            edge = PHR[il, p] > 0.0 and abs(PHR[top, p] / PHR[il, p] - 1.0) > tol
+            s_l, ok, mode = S[il, p], VALID[top, p], ALIKE[p]
+            low = s_l * m_t > c  # eq. 11 takes the low stage
+            if (eq11 and (im >= 0 or low == (mode == 0))) or (mode == 1 and im >= 0):
+                mode = 2
             c_l, c_t = CLEAR[il, p], CLEAR[top, p]
             c_m = CLEAR[im, p] if im >= 0 else c_l
             cls = 4 if (c_l and c_t and c_m) else (5 if (c_l or c_t or c_m) else 6)
-            for r in range(codes.size):
-                if codes[r] == 0:
-                    if im >= 0:
-                        continue
-                    k = il if s_l * m_t > c else top
-                else:
-                    k = top if s_t < sat[r, top] else (im if im >= 0 and s_m < sat[r, im] else il)
-                if k == top:
-                    h = s_t if codes[r] == 0 else s_t * m_t / m_t
-                elif k == il:
-                    h = s_l * m_t / m_l
-                    cnt[r, 1] += 1.0
-                else:
-                    h = s_m * m_t / mst[im]
-                    cnt[r, 2] += 1.0
+            edge = PHR[il, p] > 0.0 and abs(PHR[top, p] / PHR[il, p] - 1.0) > tol
+            e_low = (s_l * m_t / m_l - T[top, p]) / T[top, p] if ok and (low or mode > 0) else 0.0
+            for rr in range(1 if mode < 2 else n_r):
+                r, k, e = n_r, top, ETOP[0, p]
+                if mode == 1:
+                    k, e = il, e_low
+                elif mode == 2:
+                    r = rr
+                    if codes[rr] == 0:
+                        if im >= 0:
+                            continue
+                        if low:
+                            k, e = il, e_low
+                    elif S[top, p] < sat[rr, top]:
+                        e = ETOP[1, p]
+                    else:
+                        k = im if im >= 0 and S[im, p] < sat[rr, im] else il
+                        h = s_l * m_t / m_l if k == il else S[im, p] * m_t / mst[im]
+                        e = (h - T[top, p]) / T[top, p] if ok else 0.0
+                if k != top:
+                    a[r, 22 if k == il else 23] += 1.0
                 if CLIP[k, p]:
-                    cnt[r, 0] += 1.0
-                if VALID[top, p]:
-                    e = (h - T[top, p]) / T[top, p]
-                    acc[r, 0, 0] += 1.0
-                    acc[r, 1, 0] += e
-                    acc[r, 2, 0] += e * e
-                    for g in (light, 3 if edge else 0, cls):
-                        if g > 0:
-                            acc[r, 0, g] += 1.0
-                            acc[r, 1, g] += e
-                            acc[r, 2, g] += e * e
-        for r in range(codes.size):
-            for q in range(3):
-                for g in range(4):
-                    out[j, r, 3 * g + q] = acc[r, q, g]
-                out[j, r, 12 + q] = acc[r, q, 5]  # clipped: some stage not clear, some clear
-                out[j, r, 15 + q] = acc[r, q, 4] + acc[r, q, 5]  # recoverable
-                out[j, r, 18 + q] = acc[r, q, 6]  # lost
-            out[j, r, 3 * _N : 3 * _N + 3] = cnt[r]
+                    a[r, 21] += 1.0
+                if ok:
+                    e2, g = e * e, LIGHT[p]
+                    a[r, 0] += 1.0
+                    a[r, 1] += e
+                    a[r, 2] += e2
+                    a[r, 3 * cls] += 1.0
+                    a[r, 3 * cls + 1] += e
+                    a[r, 3 * cls + 2] += e2
+                    if g > 0:
+                        a[r, 3 * g] += 1.0
+                        a[r, 3 * g + 1] += e
+                        a[r, 3 * g + 2] += e2
+                    if edge:
+                        a[r, 9] += 1.0
+                        a[r, 10] += e
+                        a[r, 11] += e2
+    for j in range(lows.size):
+        for r in range(n_r):
+            if codes[r] == 0 and mids[j] >= 0:
+                continue
+            b = acc[j, r] + acc[j, n_r]
+            out[j, r, :12] = b[:12]  # whole, spot, fill, spot_edge
+            out[j, r, 12:15] = b[15:18]  # clipped: some stage not clear, some clear
+            out[j, r, 15:18] = b[12:15] + b[15:18]  # recoverable
+            out[j, r, 18:24] = b[18:24]  # lost; from a clipped stage, the low, the middle
 
 
 def _dark_loop(S: Any, T: Any, DIDX: Any, DVAR: Any, top: int, lows: Any, mids: Any, mst: Any, codes: Any,
@@ -214,8 +228,28 @@ def fusion_sums(
     ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (lows, mids, codes)]
     mst = np.ascontiguousarray(stages, dtype=np.float64)
     sat = np.ascontiguousarray(saturation, dtype=np.float64)
-    compiled(*LOOPS[0])(signal, truth, valid, clipped, clear, photons_per_row, spot, fill, int(top), ints[0],
-                        ints[1], mst, ints[2], sat, float(phi_minus_offset_top), float(tolerance), out)
+    light, e_top, alike = _top_arrays(signal, truth, valid, spot, fill, mst, int(top), ints[2], sat)
+    compiled(*LOOPS[0])(signal, truth, valid, clipped, clear, photons_per_row, light, e_top, alike,
+                        int(top), ints[0], ints[1], mst, ints[2], sat, float(phi_minus_offset_top),
+                        float(tolerance), out)
     compiled(*LOOPS[1])(signal, truth, np.ascontiguousarray(dark_pixels, dtype=np.int64), dark_var, int(top),
                         ints[0], ints[1], mst, ints[2], sat, float(phi_minus_offset_top), out)
     return out
+
+
+def _top_arrays(signal: np.ndarray, truth: np.ndarray, valid: np.ndarray, spot: np.ndarray, fill: np.ndarray,
+                mst: np.ndarray, top: int, codes: np.ndarray, sat: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Per pixel of the top stage: its light region (1 spot, 2 fill, 0 neither), its error as eq. 11
+    takes it (``s_t``) and as the other rules do (``(s_t mu_t) / mu_t``), 0 where the truth is
+    below 1 DN, and the loop's common cases (0: every rule but eq. 11 takes the top stage with
+    eq. 11's value; 1: none of them takes it; 2: neither)."""
+    s, t, ok, m = signal[top], truth[top], valid[top], mst[top]
+    e_top = np.zeros((2, s.size))
+    np.divide(s - t, t, out=e_top[0], where=ok)
+    np.divide(s * m / m - t, t, out=e_top[1], where=ok)
+    takes = [s < sat[r, top] for r in np.flatnonzero(codes != 0)]
+    every = np.logical_and.reduce(takes) if takes else np.ones(s.size, dtype=bool)
+    none = ~np.logical_or.reduce(takes) if takes else np.ones(s.size, dtype=bool)
+    mode = np.where(every & (e_top[0] == e_top[1]), 0, np.where(none, 1, 2)).astype(np.int64)
+    light = np.where(spot[top], 1, np.where(fill[top], 2, 0)).astype(np.int64)
+    return light, e_top, mode

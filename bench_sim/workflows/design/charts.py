@@ -4,10 +4,10 @@
     Every candidate's closed-form DR against its RMS error against the true HDR target, coloured
     by the share of its pixels taken from a clipped stage; the Pareto front ringed, the
     recommended design, the runner-up and the configured pair marked.
-``heatmap_<objective>.png``
-    Each reported objective over the stage pairs (``mu1`` across, ``mu2`` up), one panel per
-    rule, at the recommended design's point and word (the first point and the pass's word when
-    none is feasible).
+``heatmaps.png``
+    Each reported objective (a row) over the stage pairs (``mu1`` across, ``mu2`` up), one panel
+    per rule, at the recommended design's point and word (the first point and the pass's word
+    when none is feasible).
 """
 
 from __future__ import annotations
@@ -109,50 +109,43 @@ def _grid(table: DesignTable, sel: np.ndarray, objective: str) -> tuple[np.ndarr
     return lows, highs, grid
 
 
-def plot_heatmaps(
-    out: Path, table: DesignTable, choice: Choice, objectives: Sequence[str], meta: Mapping[str, Any]
-) -> list[str]:
-    """``plots/heatmap_<objective>.png`` per objective (module docstring); returns their names."""
+def _heat_panel(ax: Any, fig: Any, table: DesignTable, sel: np.ndarray, obj: str, title: str) -> None:
+    """One heat map: ``obj`` over (mu1, mu2) of the selected pairs."""
+    o = OBJECTIVES[obj]
+    lows, highs, grid = _grid(table, sel, obj)
+    im = ax.imshow(grid, origin="lower", aspect="auto", interpolation="nearest", cmap="viridis",
+                   extent=(lows[0] - 0.5, lows[-1] + 0.5, highs[0] - 0.5, highs[-1] + 0.5))
+    fig.colorbar(im, ax=ax, label=f"[{o.units}]")
+    better = {"max": "higher", "min": "lower", "zero": "nearer 0"}[o.direction]
+    ax.set_title(f"{obj}: {title} ({better} is better)", fontsize=7)
+    ax.set_xlabel("mu1 (low stage)", fontsize=7)
+    ax.set_ylabel("mu2 (high stage)", fontsize=7)
+    ax.tick_params(labelsize=6)
+
+
+def plot_heatmaps(out: Path, table: DesignTable, choice: Choice, objectives: Sequence[str],
+                  meta: Mapping[str, Any]) -> list[str]:
+    """``plots/heatmaps.png``: a heat map per objective (rows) and rule (columns) over the stage
+    pairs (module docstring); returns its name (none without pairs)."""
     plt = _pyplot()
     c = table.columns
-    at = choice.recommended if choice.recommended is not None else 0
-    point, beta = (
-        int(c["point"][at]),
-        int(c["beta_bits"][at]) if choice.recommended is not None else int(np.max(c["beta_bits"])),
-    )
-    rules = list(dict.fromkeys(str(r) for r in c["rule"]))
-    names = []
-    for obj in objectives:
-        o = OBJECTIVES[obj]
-        fig, axes = plt.subplots(1, len(rules), figsize=(3.6 * len(rules) + 0.8, 3.6), dpi=DPI, squeeze=False)
-        for ax, rule in zip(axes[0], rules, strict=True):
-            sel = (c["point"] == point) & (c["beta_bits"] == beta) & (c["rule"] == rule) & (c["mu_mid"] == 0)
-            if not sel.any():
-                ax.set_axis_off()
-                continue
-            lows, highs, grid = _grid(table, sel, obj)
-            im = ax.imshow(
-                grid,
-                origin="lower",
-                aspect="auto",
-                interpolation="nearest",
-                cmap="viridis",
-                extent=(lows[0] - 0.5, lows[-1] + 0.5, highs[0] - 0.5, highs[-1] + 0.5),
-            )
-            fig.colorbar(im, ax=ax, label=f"{obj} [{o.units}]")
-            if choice.recommended is not None and str(c["rule"][at]) == rule and not c["mu_mid"][at]:
-                ax.plot([c["mu1"][at]], [c["mu2"][at]], "r*", ms=10)
-            ax.set_xlabel("mu1 (low stage)")
-            ax.set_ylabel("mu2 (high stage)")
-            ax.set_title(
-                f"{rule}, {beta}-bit "
-                f"({'higher' if o.direction == 'max' else 'lower' if o.direction == 'min' else 'nearer 0'} "
-                "is better)",
-                fontsize=8,
-            )
-        fig.suptitle(f"{obj} over the stage pairs, point {point}", fontsize=10)
-        fig.tight_layout()
-        name = f"plots/heatmap_{obj}.png"
-        write_figure_png(out / name, fig, dict(meta, figure=f"heat map of {obj}"), dpi=DPI)
-        names.append(name)
-    return names
+    best = choice.recommended
+    point = int(c["point"][best]) if best is not None else int(c["point"][0])
+    beta = int(c["beta_bits"][best]) if best is not None else int(np.max(c["beta_bits"]))
+    base = (c["point"] == point) & (c["beta_bits"] == beta) & (c["mu_mid"] == 0)
+    rules = [r for r in dict.fromkeys(str(r) for r in c["rule"]) if (base & (c["rule"] == r)).any()]
+    if not rules or not objectives:
+        return []
+    size = (3.3 * len(rules) + 0.6, 2.7 * len(objectives))
+    fig, axes = plt.subplots(len(objectives), len(rules), figsize=size, dpi=DPI, squeeze=False,
+                             layout="constrained")
+    for row, obj in zip(axes, objectives, strict=True):
+        for ax, rule in zip(row, rules, strict=True):
+            _heat_panel(ax, fig, table, base & (c["rule"] == rule), obj, f"{rule}, {beta}-bit")
+            if best is not None and str(c["rule"][best]) == rule and not c["mu_mid"][best]:
+                ax.plot([c["mu1"][best]], [c["mu2"][best]], "r*", ms=8)
+    fig.suptitle(f"Objectives over the stage pairs (point {point}; red star: the recommended design)",
+                 fontsize=9)
+    write_figure_png(out / "plots" / "heatmaps.png", fig, dict(meta, figure="heat maps per objective"),
+                     dpi=DPI)
+    return ["plots/heatmaps.png"]

@@ -10,21 +10,20 @@ A spec is a TOML file (the shipped example: ``bench_sim/scenes/designs/example.t
     noise = "common"                    # "common" (default): every point's pass on the root seed's
                                         # stream; "independent": point i on SeedSequence(seed).spawn(n)[i]
     mode = "product"                    # how [[parameters]] combine: product | sequential | custom
-
-    [overrides]                         # keys set on the base (optional)
-    lights.strong = { irradiance_w_m2 = 200.0 }
-
-    [stages]                            # the stage candidates (each of a point's sensor rows)
-    mu1 = "all"                         # the lower stage: "all", "A:B", "A:B:STEP", "A,B,C" or a list
-    mu2 = "all"                         # the upper stage: every mu1 < mu2 of the two is a pair
-    triples = [[10, 30, 80]]            # three-stage candidates (the clip-aware rules fuse them)
-
     rules = ["eq11", "clip", "clip_margin"]   # fusion rules (bench_sim.measure.fusion_scores.RULES)
     beta_bits = [12, 16]                # output words, scored from one pass at the widest
     objectives = ["dr_db", "truth_rms", "clipped_share", "snr_dark"]
     rank = ["truth_rms", "dr_db"]       # the ranking rule: objectives in order, each its own way
     chain_dr = "front"                  # DR through the chain: "front" (the Pareto front and the
                                         # chosen designs), "chosen" (these alone) or "none"
+
+    [overrides]                         # keys set on the base (optional)
+    lights.strong = { irradiance_w_m2 = 200.0 }
+
+    [stages]                            # the stage candidates (each of a point's sensor rows)
+    mu1 = "all"                         # the lower stage: "all", "A:B", "A:B:STEP", "A,B" or a list
+    mu2 = "all"                         # the upper stage: every mu1 < mu2 of the two is a pair
+    triples = [[10, 30, 80]]            # three-stage candidates (the clip-aware rules fuse them)
 
     [[constraints]]
     objective = "dr_db"
