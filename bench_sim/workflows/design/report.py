@@ -14,6 +14,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from bench_sim.config import config_sha256
 from bench_sim.io import markdown_table, write_text
 from bench_sim.measure.design_scores import DARK_FRACTION, word_config
@@ -27,7 +29,7 @@ from bench_sim.workflows.design.table import DesignTable
 from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.reproduce.wording import pct
 
-__all__ = ["report_markdown", "write_report", "fmt_value", "word_cap", "WordCap", "FRONT_ROWS"]
+__all__ = ["report_markdown", "write_report", "fmt_value", "fmt_pair", "word_cap", "WordCap", "FRONT_ROWS"]
 
 #: rows of the front's table in the report (all of them are in candidates.csv)
 FRONT_ROWS = 30
@@ -35,21 +37,32 @@ FRONT_ROWS = 30
 _WIDEST = 32
 
 
-def fmt_value(name: str, v: Any) -> str:
+def fmt_value(name: str, v: Any, more: int = 0) -> str:
     """A column's value as the report writes it: dB with two decimals, shares and relative errors
-    as percentages that read 0 % / 100 % only when exact, SNR with three digits."""
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+    as percentages that read 0 % / 100 % only when exact, SNR with three digits; ``more``
+    digits besides."""
+    if v is None or (isinstance(v, float | np.floating) and not math.isfinite(v)):
         return "n/a"
     v = float(v)
     if name.endswith("_db"):
-        return f"{v:.2f} dB"
+        return f"{v:.{2 + more}f} dB"
     if name in ("clipped_share", "low_share"):
-        return pct(v, 2)
+        return pct(v, 2 + more)
     if name.startswith("truth_"):
-        return pct(v, 3, sign=name.startswith("truth_bias"))
+        return pct(v, 3 + more, sign=name.startswith("truth_bias"))
     if name == "mtf50_along":
-        return f"{v:.3f} cycles/px"
-    return f"{v:.3g}"
+        return f"{v:.{3 + more}f} cycles/px"
+    return f"{v:.{3 + more}g}"
+
+
+def fmt_pair(name: str, a: Any, b: Any) -> tuple[str, str]:
+    """Two values of a column as the report writes them, with as many more digits as it takes
+    (up to 8) for two different values not to read alike."""
+    for more in range(9):
+        fa, fb = fmt_value(name, a, more), fmt_value(name, b, more)
+        if fa != fb or a == b or "n/a" in (fa, fb):
+            break
+    return fa, fb
 
 
 def _name(c: Mapping[str, Any], i: int) -> str:
@@ -160,9 +173,8 @@ def _versus(c: Mapping[str, Any], a: int, b: int, names: Sequence[str]) -> str:
         else:
             ka, kb = o.key(va), o.key(vb)
             verdict = "better" if ka < kb else ("worse" if ka > kb else "equal")
-        parts.append(
-            f"`{n}` {fmt_value(n, va)} against {fmt_value(n, vb)}" + (f" ({verdict})" if verdict else "")
-        )
+        fa, fb = fmt_pair(n, va, vb)
+        parts.append(f"`{n}` {fa} against {fb}" + (f" ({verdict})" if verdict else ""))
     return "; ".join(parts)
 
 
@@ -186,7 +198,8 @@ def _why_runner_up(spec: DesignSpec, c: Mapping[str, Any], best: int, second: in
         ]
     before = spec.rank[: spec.rank.index(r)]
     tie = f", after equal {', '.join(f'`{x}`' for x in before)}" if before else ""
-    return [f"{head}, on `{r}`{tie}: {fmt_value(r, c[r][best])} against {fmt_value(r, c[r][second])}."]
+    fa, fb = fmt_pair(r, c[r][best], c[r][second])
+    return [f"{head}, on `{r}`{tie}: {fa} against {fb}."]
 
 
 def _constraint_failures(spec: DesignSpec, c: Mapping[str, Any], i: int) -> list[str]:
@@ -218,10 +231,8 @@ def _against_reference(spec: DesignSpec, c: Mapping[str, Any], choice: Choice) -
         if d
         else "has the same closed-form DR"
     )
-    out.append(
-        f"The recommended design {trade} ({fmt_value('dr_db', c['dr_db'][best])} against "
-        f"{fmt_value('dr_db', c['dr_db'][ref])})."
-    )
+    fa, fb = fmt_pair("dr_db", c["dr_db"][best], c["dr_db"][ref])
+    out.append(f"The recommended design {trade} ({fa} against {fb}).")
     names = [n for n in spec.objectives if n != "dr_db"]
     if names:
         out.append(f"On the other objectives: {_versus(c, best, ref, names)}.")
@@ -405,7 +416,8 @@ def report_markdown(
         f"seed {spec.seed}, noise **{spec.noise}**{', --quick preset' if spec.quick else ''}, bench_sim "
         f"{__version__}.",
         "",
-        f"**{len(table)} candidates** of {len(spec.points)} points ({ok} ran, {len(failed)} failed): "
+        f"**{len(table)} candidates** of {len(spec.points)} point{'s' if len(spec.points) != 1 else ''} "
+        f"({ok} scored, {len(failed)} failed): "
         f"{len(space.pairs)} stage pairs and {len(space.triples)} triples, rules "
         f"{', '.join(f'`{r}`' for r in space.rules)}, words {', '.join(str(b) for b in space.words)} bits"
         + (f", over {', '.join(f'`{k}`' for k in spec.keys)}" if spec.keys else "")

@@ -49,7 +49,7 @@ from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.measure.design_scores import word_config
 from bench_sim.runtime.execution import TaskOutcome, default_workers, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
-from bench_sim.workflows.design.objectives import Choice, choose
+from bench_sim.workflows.design.objectives import Choice
 from bench_sim.workflows.design.passes import (
     ChainTask,
     PointResult,
@@ -58,7 +58,7 @@ from bench_sim.workflows.design.passes import (
     point_inputs,
 )
 from bench_sim.workflows.design.report import write_report
-from bench_sim.workflows.design.table import DesignTable, build_table, write_tables
+from bench_sim.workflows.design.table import DesignTable, build_table, judge, write_tables
 from bench_sim.workflows.design.tasks import (
     QUICK_DR_LEVELS,
     DesignPlan,
@@ -165,15 +165,6 @@ def _run_points(plan: DesignPlan, client: Any, records: dict[int, dict[str, Any]
         )
 
 
-def _reference(plan: DesignPlan) -> tuple[int, int, int, str]:
-    """The reference candidate: the configured pair by eq. 11 (else the first rule) at the base's
-    word (else the pass's)."""
-    spec = plan.spec
-    words, rules = spec.space.words, spec.space.rules
-    beta = spec.base.dtdi.beta_bits if spec.base.dtdi.beta_bits in words else spec.space.pass_beta
-    return (*spec.reference, beta, "eq11" if "eq11" in rules else rules[0])
-
-
 def _chain_tasks(
     plan: DesignPlan, table: DesignTable, choice: Choice, records: dict[int, dict[str, Any]]
 ) -> list[tuple[ChainTask, list[int]]]:
@@ -273,14 +264,7 @@ def _judge(plan: DesignPlan, records: dict[int, dict[str, Any]]) -> tuple[Design
     ok = {i: r for i, r in records.items() if r["status"] == "ok"}
     scores = {i: read_scores(scores_path(plan.out, i)) for i in ok}
     table = build_table(plan.spec, ok, scores)
-    spec = plan.spec
-    choice = choose(table.columns, spec.constraints, spec.rank, _reference(plan))
-    c = table.columns
-    c["feasible"][:] = choice.feasible
-    c["on_front"][:] = choice.front
-    for k, i in enumerate(choice.ranked):
-        c["rank"][i] = k + 1
-    return table, choice
+    return table, judge(table, plan.spec)
 
 
 def _meta(

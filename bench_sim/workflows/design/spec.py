@@ -50,6 +50,7 @@ from pydantic import BaseModel, ConfigDict
 
 from bench_sim.config import (
     BenchConfig,
+    ConfigError,
     config_to_toml_dict,
     load_config,
     quick_config,
@@ -302,23 +303,24 @@ def _space(spec: Path, top: _SpecFile, base: BenchConfig) -> CandidateSpace:
     return CandidateSpace(tuple(sorted(pairs)), tuple(sorted(triples)), tuple(top.rules), words)
 
 
-def _check_words(spec: Path, p: SweepPoint, space: CandidateSpace) -> None:
-    """Every word of the space holds every candidate stage's offset below half its range, and
-    every candidate stage is one of the point's sensor rows."""
-    rows = p.cfg.sensor.rows
+def _check_words(spec: Path, cfg: BenchConfig, space: CandidateSpace, where: str) -> None:
+    """Every word of the space is a valid word of the bench ``cfg`` and holds every candidate
+    stage's offset below half its range, and every candidate stage is one of its sensor rows."""
+    rows = cfg.sensor.rows
     top_stage = max(space.stages)
     if top_stage > rows:
-        raise _err(spec, f"point {p.index}: stage {top_stage} is outside the sensor's rows 1..{rows}")
+        raise _err(spec, f"{where}stage {top_stage} is outside the sensor's rows 1..{rows}")
     for beta in space.words:
+        try:
+            word_config(cfg, beta)
+        except ConfigError as exc:
+            raise _err(spec, f"beta_bits = {beta}: {where}{str(exc).split(': ', 2)[-1]}") from None
         top = word_clip_dn(beta)
-        off = max(stage_offset_dn(p.cfg.sensor, p.cfg.dtdi, m) for m in space.stages)
+        off = max(stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in space.stages)
         if not off < 0.5 * top:
-            raise _err(
-                spec,
-                f"beta_bits = {beta}: the offset of the words ({off:g} DN: dtdi.pedestal_dn and, with "
-                f"subtract_black off, m x black_offset_dn) is half the {beta}-bit word or more "
-                f"(point {p.index}); use wider words or a smaller pedestal",
-            )
+            raise _err(spec, f"beta_bits = {beta}: {where}the offset of the words ({off:g} DN: "
+                             "dtdi.pedestal_dn and, with subtract_black off, m x black_offset_dn) is half "
+                             f"the {beta}-bit word or more; use wider words or a smaller pedestal")
 
 
 def _points(
@@ -371,9 +373,10 @@ def load_design_spec(path: str | Path) -> DesignSpec:
         raise _err(
             spec, f"{n} candidates per point: more than {MAX_CANDIDATES}; narrow [stages] or beta_bits"
         )
+    _check_words(spec, base_cfg, space, "")
     keys, values, points = _points(spec, top, base_cfg, space.pass_beta)
     for p in points:
-        _check_words(spec, p, space)
+        _check_words(spec, p.cfg, space, f"point {p.index}: ")
     return DesignSpec(
         spec,
         top.name or spec.stem,

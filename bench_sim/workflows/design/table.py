@@ -29,11 +29,13 @@ from bench_sim.io import atomic_path, write_csv, write_json
 from bench_sim.io.strict_json import strict_json
 from bench_sim.measure.design_scores import SCORE_COLUMNS
 from bench_sim.version import __version__
-from bench_sim.workflows.design.objectives import OBJECTIVES
+from bench_sim.workflows.design.objectives import OBJECTIVES, Choice, choose
 from bench_sim.workflows.design.spec import DesignSpec
 from bench_sim.workflows.sweep.points import key_units
 
-__all__ = ["DesignTable", "COLUMN_DOCS", "build_table", "write_tables", "stages_label"]
+__all__ = [
+    "DesignTable", "COLUMN_DOCS", "build_table", "write_tables", "stages_label", "judge", "reference_of",
+]
 
 #: the columns besides the scores and the point's keys: name -> (units, meaning)
 COLUMN_DOCS: dict[str, tuple[str, str]] = {
@@ -209,3 +211,25 @@ def write_tables(out: Path, table: DesignTable, spec: DesignSpec, meta: Mapping[
     with atomic_path(out / "design.nc") as tmp:
         ds.to_netcdf(tmp)
     return ["candidates.csv", "candidates.csv.json", "design.nc"]
+
+
+def reference_of(spec: DesignSpec) -> tuple[int, int, int, str]:
+    """The reference candidate ``(mu1, mu2, beta_bits, rule)``: the configured pair by eq. 11 (else
+    the first rule) at the base's word (else the pass's)."""
+    words, rules = spec.space.words, spec.space.rules
+    beta = spec.base.dtdi.beta_bits if spec.base.dtdi.beta_bits in words else spec.space.pass_beta
+    return (*spec.reference, beta, "eq11" if "eq11" in rules else rules[0])
+
+
+def judge(table: DesignTable, spec: DesignSpec) -> Choice:
+    """Judge the table by the spec's constraints and ranking rule
+    (:func:`bench_sim.workflows.design.objectives.choose`) and fill its ``feasible``, ``on_front``
+    and ``rank`` columns."""
+    choice = choose(table.columns, spec.constraints, spec.rank, reference_of(spec))
+    c = table.columns
+    c["feasible"][:] = choice.feasible
+    c["on_front"][:] = choice.front
+    c["rank"][:] = 0
+    for k, i in enumerate(choice.ranked):
+        c["rank"][i] = k + 1
+    return choice
