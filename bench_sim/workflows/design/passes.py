@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,6 +45,7 @@ __all__ = [
     "measure_chain",
     "point_inputs",
     "point_generator",
+    "pass_stages",
     "CHAIN_COLUMNS",
 ]
 
@@ -130,16 +132,25 @@ def _stage_mtf(cfg: BenchConfig, seed: int, stages: tuple[int, ...]) -> dict[int
     return {m: (None if math.isnan(vals[m]) else vals[m]) for m in stages}
 
 
-def measure_point(task: PointTask, *inputs: Any) -> PointResult:
+def pass_stages(task: PointTask) -> tuple[int, ...]:
+    """The stages of a point's pass: every candidate stage and the sensor's last row (every row
+    exposed, as ``simulate --stages all`` exposes them)."""
+    return tuple(sorted({*task.space.stages, task.cfg.sensor.rows}))
+
+
+def measure_point(
+    task: PointTask, *inputs: Any, on_frames: Callable[[int], None] | None = None
+) -> PointResult:
     """One point: the pass, its candidates' scores and the sharpness per stage (module docstring).
-    ``inputs``: its shared light records, if any."""
+    ``inputs``: its shared light records, if any; ``on_frames``: called with the frames of each
+    rendered chunk (a progress bar, in this process)."""
     records = next((x for x in inputs if isinstance(x, LightRecords)), None)
     if records is not None:
         install_records(records)
     cfg, space = task.cfg, task.space
     rng = point_generator(task.root_seed, task.stream)
     t0 = time.perf_counter()
-    sim = run_pass(cfg, sorted({*space.stages, cfg.sensor.rows}), rng, truth=True, truth_stages=space.stages)
+    sim = run_pass(cfg, pass_stages(task), rng, truth=True, truth_stages=space.stages, on_frames=on_frames)
     state = dict(rng.bit_generator.state)
     t1 = time.perf_counter()
     scores = score_candidates(cfg, sim.dataset, space)

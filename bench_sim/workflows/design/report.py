@@ -20,6 +20,7 @@ from bench_sim.config import config_sha256
 from bench_sim.io import markdown_table, write_text
 from bench_sim.measure.design_scores import DARK_FRACTION, word_config
 from bench_sim.metrics.fusion_truth import CLIP_MARGIN_SIGMAS
+from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.sensor.model import stage_clips_on_word, stage_dr_model_db, stage_saturation_photons
 from bench_sim.version import __version__
 from bench_sim.workflows.design.charts import plot_heatmaps, plot_pareto
@@ -392,6 +393,12 @@ def _method(spec: DesignSpec, records: Mapping[int, Mapping[str, Any]]) -> list[
         if not notes
         else "- The truth is not exact for this sensor's chain: " + "; ".join(notes) + "."
     )
+    effects = sorted({e.name for p in spec.points for e in sensor_chain(p.cfg.sensor).effects})
+    if effects:
+        names = ", ".join(f"`{e}`" for e in effects)
+        lines.append(f"- The sensor's chain has effects ({names}): the words, the truth and the DR through "
+                     "the chain include them; the closed forms (`dr_db`, `dr_cap_db`, `snr_dark`'s variance) "
+                     "are the linear model's.")
     return [*lines, ""]
 
 

@@ -31,6 +31,7 @@ overwritten, and a folder holding anything a design does not write is refused.
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import json
 import time
@@ -49,12 +50,14 @@ from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.measure.design_scores import word_config
 from bench_sim.runtime.execution import TaskOutcome, default_workers, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
+from bench_sim.sensor.dtdi import frames_needed
 from bench_sim.workflows.design.objectives import Choice
 from bench_sim.workflows.design.passes import (
     ChainTask,
     PointResult,
     measure_chain,
     measure_point,
+    pass_stages,
     point_inputs,
 )
 from bench_sim.workflows.design.report import write_report
@@ -141,28 +144,26 @@ def _point_record(plan: DesignPlan, outcome: TaskOutcome) -> dict[str, Any]:
 
 
 def _run_points(plan: DesignPlan, client: Any, records: dict[int, dict[str, Any]], progress: bool) -> None:
-    """Run the points still to do; journal each as it arrives."""
+    """Run the points still to do; journal each as it arrives. The bar counts the passes' frames
+    when they run in this process, the points on a cluster."""
     todo = plan.todo
     journal = points_journal(plan.out)
-    with progress_bar("design: passes", len(todo), "points", enabled=progress) as bar:
+    here = client is None
+    total = sum(frames_needed(t.cfg.lines, pass_stages(t)) for t in todo) if here else len(todo)
+    with progress_bar("design: passes", total, "frames" if here else "points", enabled=progress) as bar:
 
         def done(outcome: TaskOutcome) -> None:
             rec = _point_record(plan, outcome)
             journal.write(rec)
             records[outcome.index] = rec
-            bar.advance()
+            if not here:
+                bar.advance()
 
         shared, counting = point_inputs(todo)
         args = [replace(t, count_records=t.index in counting) for t in todo]
-        run_tasks(
-            measure_point,
-            args,
-            client=client,
-            indices=[t.index for t in todo],
-            on_result=done,
-            shared=shared,
-            keep_values=False,
-        )
+        func = functools.partial(measure_point, on_frames=bar.advance) if here else measure_point
+        run_tasks(func, args, client=client, indices=[t.index for t in todo], on_result=done, shared=shared,
+                  keep_values=False)
 
 
 def _chain_tasks(
