@@ -67,18 +67,18 @@ def plot_pareto(out: Path, table: DesignTable, choice: Choice, meta: Mapping[str
         linewidths=0.8,
         label="Pareto front (DR, truth RMS, clipped share)",
     )
-    marks = (
-        ("recommended", choice.recommended, "*", "C3"),
-        ("runner-up", choice.runner_up, "D", "C1"),
-        ("configured pair", choice.reference, "s", "C0"),
+    marks = (  # the recommended design last, on top (a runner-up that ties with it sits below)
+        ("configured pair", choice.reference, "s", "C0", 120),
+        ("runner-up", choice.runner_up, "D", "C1", 120),
+        ("recommended", choice.recommended, "*", "C3", 200),
     )
-    for label, i, marker, color in marks:
+    for label, i, marker, color, size in marks:
         if i is not None and ok[i]:
             ax.scatter(
                 [x[i]],
                 [y[i]],
                 marker=marker,
-                s=120,
+                s=size,
                 color=color,
                 edgecolors="k",
                 label=f"{label}: {c['stages'][i]} {c['rule'][i]} {c['beta_bits'][i]}-bit",
@@ -109,12 +109,20 @@ def _grid(table: DesignTable, sel: np.ndarray, objective: str) -> tuple[np.ndarr
     return lows, highs, grid
 
 
+def _edges(stages: np.ndarray) -> np.ndarray:
+    """Cell edges around the stages: half-way between neighbours, half a step beyond the ends."""
+    m = np.asarray(stages, dtype=np.float64)
+    if m.size == 1:
+        return np.array([m[0] - 0.5, m[0] + 0.5])
+    mid = (m[1:] + m[:-1]) / 2
+    return np.concatenate([[m[0] - (mid[0] - m[0])], mid, [m[-1] + (m[-1] - mid[-1])]])
+
+
 def _heat_panel(ax: Any, fig: Any, table: DesignTable, sel: np.ndarray, obj: str, title: str) -> None:
     """One heat map: ``obj`` over (mu1, mu2) of the selected pairs."""
     o = OBJECTIVES[obj]
     lows, highs, grid = _grid(table, sel, obj)
-    im = ax.imshow(grid, origin="lower", aspect="auto", interpolation="nearest", cmap="viridis",
-                   extent=(lows[0] - 0.5, lows[-1] + 0.5, highs[0] - 0.5, highs[-1] + 0.5))
+    im = ax.pcolormesh(_edges(lows), _edges(highs), np.ma.masked_invalid(grid), cmap="viridis")
     fig.colorbar(im, ax=ax, label=f"[{o.units}]")
     better = {"max": "higher", "min": "lower", "zero": "nearer 0"}[o.direction]
     ax.set_title(f"{obj}: {title} ({better} is better)", fontsize=7)
