@@ -177,17 +177,17 @@ class _Stacks:
 
 
 def _stacks(cfg: BenchConfig, ds: xr.Dataset, stages: Sequence[int]) -> _Stacks:
-    """The pass's arrays at ``stages``, flat over the pixels, and the darkest region."""
+    """The pass's arrays at all its stages (``stages`` among them), flat over the pixels, and the
+    darkest region (by the light per row at the pass's highest stage: the same for every
+    candidate)."""
     have = [int(m) for m in ds.stage.values]
     missing = sorted(set(stages) - set(have))
     if missing:
         raise BenchSimError(f"score_candidates: the pass has no stage {missing[0]} (its stages: {have})")
-
-    whole = have == list(stages)  # the pass's own arrays, no copy
+    stages = have  # the pass's own arrays, no copy
 
     def flat(name: str, dtype: Any = None) -> np.ndarray:
-        v = ds[name].values if whole else ds[name].sel(stage=list(stages)).values
-        return np.ascontiguousarray(v.reshape(len(stages), -1), dtype=dtype)
+        return np.ascontiguousarray(ds[name].values.reshape(len(stages), -1), dtype=dtype)
 
     st = np.asarray(stages, dtype=np.int64)
     off_map = stage_offsets_dn(cfg, stages)

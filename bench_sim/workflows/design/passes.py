@@ -2,8 +2,9 @@
 candidate's dynamic range through the chain.
 
 :func:`measure_point` runs ``simulate``'s pass of the point's bench with its truth at every
-candidate stage (the pass exposes every sensor row, as ``simulate --stages all`` does, so a
-stage's words do not depend on which other stages are candidates), scores every candidate on
+candidate stage and the sensor's last row (the pass exposes every sensor row, as ``simulate
+--stages all`` does, so a stage's words do not depend on which other stages are candidates, nor
+does the darkest region), scores every candidate on
 it (:func:`bench_sim.measure.design_scores.score_candidates`) and, when the design reports the
 sharpness, measures the MTF50 along the track per candidate stage on a noise-free companion
 pass with slanted edges (:func:`bench_sim.workflows.reproduce.stage_mtf.measure_stage_mtf`, as
@@ -133,8 +134,9 @@ def _stage_mtf(cfg: BenchConfig, seed: int, stages: tuple[int, ...]) -> dict[int
 
 
 def pass_stages(task: PointTask) -> tuple[int, ...]:
-    """The stages of a point's pass: every candidate stage and the sensor's last row (every row
-    exposed, as ``simulate --stages all`` exposes them)."""
+    """The stages of a point's pass, each with its truth: every candidate stage and the sensor's
+    last row (every row exposed, as ``simulate --stages all`` exposes them; the darkest region is
+    the darkest light per row over the whole window)."""
     return tuple(sorted({*task.space.stages, task.cfg.sensor.rows}))
 
 
@@ -150,7 +152,7 @@ def measure_point(
     cfg, space = task.cfg, task.space
     rng = point_generator(task.root_seed, task.stream)
     t0 = time.perf_counter()
-    sim = run_pass(cfg, pass_stages(task), rng, truth=True, truth_stages=space.stages, on_frames=on_frames)
+    sim = run_pass(cfg, pass_stages(task), rng, truth=True, on_frames=on_frames)
     state = dict(rng.bit_generator.state)
     t1 = time.perf_counter()
     scores = score_candidates(cfg, sim.dataset, space)

@@ -367,9 +367,8 @@ def _method(spec: DesignSpec, records: Mapping[int, Mapping[str, Any]]) -> list[
         "ADC top, "
         "or the word at its top).",
         f"- `snr_dark`: the temporal SNR of the darkest {DARK_FRACTION:.0%} of the pixels (by their light "
-        "per row), "
-        "the mean true signal of the stage each pixel came from over the square root of its mean model "
-        "variance.",
+        "per row over the sensor's whole TDI window, the same pixels for every candidate): the mean true "
+        "signal of the stage each pixel came from over the square root of its mean model variance.",
         "- `dr_db`: closed form of the EMVA 1288 linear model, `20 lg(saturation of the lowest stage / SNR "
         "= 1 of "
         "the highest stage)`; `dr_cap_db` is what the output word takes from it.",
