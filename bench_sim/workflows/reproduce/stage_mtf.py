@@ -30,6 +30,7 @@ track in cycles/px, and the same for ``Gamma_HDR`` in the last row, ``stage`` = 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -96,11 +97,13 @@ def noise_free(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     return out
 
 
-def measure_stage_mtf(cfg: BenchConfig, seed: int) -> xr.Dataset:
+def measure_stage_mtf(cfg: BenchConfig, seed: int, stages: Sequence[int] | None = None) -> xr.Dataset:
     """The companion pass (module docstring), noise-free (:func:`noise_free`), with its e-SFR per
-    stage and of ``Gamma_HDR``."""
+    stage and of ``Gamma_HDR``; at ``stages`` and ``mu1``, ``mu2`` if given (``bench-sim design``:
+    every candidate stage), else at :data:`MTF_STAGES`."""
     comp = companion_config(cfg)
-    stages = sorted({m for m in MTF_STAGES if m <= cfg.sensor.rows} | {cfg.fusion.mu1, cfg.fusion.mu2})
+    chosen = MTF_STAGES if stages is None else tuple(stages)
+    stages = sorted({m for m in chosen if m <= cfg.sensor.rows} | {cfg.fusion.mu1, cfg.fusion.mu2})
     rng = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(2)[1])
     return add_sharpness(noise_free(run_pass(comp, stages, rng, truth=True).dataset, comp), comp)
 
