@@ -58,8 +58,8 @@ def fmt_value(name: str, v: Any, more: int = 0) -> str:
 
 def fmt_pair(name: str, a: Any, b: Any) -> tuple[str, str]:
     """Two values of a column as the report writes them, with as many more digits as it takes
-    (up to 8) for two different values not to read alike."""
-    for more in range(9):
+    (up to 14) for two different values not to read alike."""
+    for more in range(15):
         fa, fb = fmt_value(name, a, more), fmt_value(name, b, more)
         if fa != fb or a == b or "n/a" in (fa, fb):
             break
