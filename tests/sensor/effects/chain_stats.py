@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pytest
 from scipy import stats
 
 from bench_sim.config import BenchConfig, SensorConfig
@@ -232,6 +233,21 @@ def expose_reads(sensor: SensorConfig, photons: np.ndarray, frames: int, *, seed
     k1, k2, _ = law_read_cumulants(lam, det, np.broadcast_to(offset, lam.shape), rm, law,
                                    slice(0, lam.shape[0]), noisy=sensor.shot_noise or sensor.dark_noise)
     return Reads(reads, k1, k2)
+
+
+def full_well_ramp(sensor: SensorConfig, *, rows: int = 4, columns: int = 64) -> np.ndarray:
+    """Mean photons per pixel per frame, (rows, columns): every row the same ramp of electrons
+    from 2 % to 125 % of the full well (through every clip of the read)."""
+    electrons = np.linspace(0.02, 1.25, columns) * sensor.full_well_e
+    return np.broadcast_to(electrons / sensor.quantum_efficiency, (rows, columns)).copy()
+
+
+#: (clip, stage) cases of the stage-word tests of an effect whose truth needs no tuned light:
+#: each clip acting alone at stage 1 and stage 80 (the long ones marked slow)
+CLIP_CASES = [
+    ("none", 1), ("full well", 1), ("ADC", 1), ("word at stage 1", 1), ("none", 80), ("word at stage 80", 80),
+    pytest.param("full well", 80, marks=pytest.mark.slow), pytest.param("ADC", 80, marks=pytest.mark.slow),
+]
 
 
 def assert_reads_follow_the_truth(r: Reads, what: str) -> None:

@@ -17,11 +17,13 @@ from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.sensor.effects.defects import KINDS
 from bench_sim.sensor.fixed_pattern import draw_fixed_pattern
 from tests.sensor.effects.chain_stats import (
+    CLIP_CASES,
     assert_reads_follow_the_truth,
     assert_truth,
     clip_cfg,
     draw,
     expose_reads,
+    full_well_ramp,
 )
 
 pytestmark = pytest.mark.physics
@@ -127,8 +129,7 @@ def test_reads_follow_the_truth(adc_bits):
     rates = {k: 0.1 for k in RATES}
     sensor = SensorConfig(rows=4, columns=64, adc_bits=adc_bits,
                           effects={"d": {"kind": "defects", **rates, **VALUES}})
-    electrons = np.linspace(0.02, 1.25, 64) * sensor.full_well_e
-    photons = np.broadcast_to(electrons / sensor.quantum_efficiency, (4, 64)).copy()
+    photons = full_well_ramp(sensor)
     r = expose_reads(sensor, photons, 10000)
     state = dict(draw_fixed_pattern(sensor, np.random.default_rng(3)).effects)["d"]
     assert all(np.any(np.asarray(state["code"]) == j + 1) for j in range(len(KINDS)))
@@ -137,13 +138,7 @@ def test_reads_follow_the_truth(adc_bits):
 
 # --- the truth of the stage words ------------------------------------------------------------------
 
-CASES = [
-    ("none", 1), ("full well", 1), ("ADC", 1), ("word at stage 1", 1), ("none", 80), ("word at stage 80", 80),
-    pytest.param("full well", 80, marks=pytest.mark.slow), pytest.param("ADC", 80, marks=pytest.mark.slow),
-]
-
-
-@pytest.mark.parametrize(("clip", "stage"), CASES)
+@pytest.mark.parametrize(("clip", "stage"), CLIP_CASES)
 def test_stage_words_of_the_map_follow_the_truth(tmp_path, clip, stage):
     """The map's pixels (every kind in row 0, which stage 1 reads), 16 seeds on one sensor."""
     effects = {"d": {"kind": "defects", "map_file": write_map(tmp_path)}}

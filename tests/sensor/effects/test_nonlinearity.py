@@ -22,6 +22,7 @@ from tests.sensor.effects.chain_stats import (
     draw,
     expose_reads,
     flat_cfg,
+    full_well_ramp,
 )
 
 pytestmark = pytest.mark.physics
@@ -144,8 +145,7 @@ def test_reads_follow_the_truth_from_zero_to_beyond_the_full_well(effect, adc_bi
     """10,000 reads per pixel of 4 x 64 pixels from 2 % to 125 % of the full well (through the
     knee, to the full well or the ADC's top): sample mean and variance against the truth's."""
     sensor = SensorConfig(rows=4, columns=64, adc_bits=adc_bits, effects=effect)
-    electrons = np.linspace(0.02, 1.25, 64) * FW
-    photons = np.broadcast_to(electrons / sensor.quantum_efficiency, (4, 64)).copy()
+    photons = full_well_ramp(sensor)
     assert_reads_follow_the_truth(expose_reads(sensor, photons, 10000), str(effect))
 
 

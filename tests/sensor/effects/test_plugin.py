@@ -20,6 +20,7 @@ from tests.sensor.effects.chain_stats import (
     draw,
     expose_reads,
     flat_cfg,
+    full_well_ramp,
 )
 
 pytestmark = pytest.mark.physics
@@ -74,8 +75,7 @@ def test_gamma_reads_follow_the_truth(user_file, adc_bits):
     """10,000 reads per pixel of 4 x 64 pixels from 2 % to 125 % of the full well (the gamma
     curve's steep foot included)."""
     sensor = SensorConfig(rows=4, columns=64, adc_bits=adc_bits, effects=gamma(user_file))
-    electrons = np.linspace(0.02, 1.25, 64) * sensor.full_well_e
-    photons = np.broadcast_to(electrons / sensor.quantum_efficiency, (4, 64)).copy()
+    photons = full_well_ramp(sensor)
     assert_reads_follow_the_truth(expose_reads(sensor, photons, 10000), f"gamma, {adc_bits}-bit ADC")
 
 

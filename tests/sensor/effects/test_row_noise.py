@@ -12,11 +12,13 @@ from scipy import stats
 
 from bench_sim.config import SensorConfig
 from tests.sensor.effects.chain_stats import (
+    CLIP_CASES,
     assert_reads_follow_the_truth,
     assert_truth,
     clip_cfg,
     draw,
     expose_reads,
+    full_well_ramp,
 )
 
 pytestmark = pytest.mark.physics
@@ -29,18 +31,11 @@ EFFECT = {"rn": {"kind": "row_noise", "rms_dn": SIGMA_ROW_DN}}
 def test_reads_follow_the_truth(adc_bits):
     """10,000 reads per pixel of 4 x 64 pixels from 2 % to 125 % of the full well."""
     sensor = SensorConfig(rows=4, columns=64, adc_bits=adc_bits, effects=EFFECT)
-    electrons = np.linspace(0.02, 1.25, 64) * sensor.full_well_e
-    photons = np.broadcast_to(electrons / sensor.quantum_efficiency, (4, 64)).copy()
+    photons = full_well_ramp(sensor)
     assert_reads_follow_the_truth(expose_reads(sensor, photons, 10000), f"row noise, {adc_bits}-bit ADC")
 
 
-CASES = [
-    ("none", 1), ("full well", 1), ("ADC", 1), ("word at stage 1", 1), ("none", 80), ("word at stage 80", 80),
-    pytest.param("full well", 80, marks=pytest.mark.slow), pytest.param("ADC", 80, marks=pytest.mark.slow),
-]
-
-
-@pytest.mark.parametrize(("clip", "stage"), CASES)
+@pytest.mark.parametrize(("clip", "stage"), CLIP_CASES)
 def test_stage_words_follow_the_truth(clip, stage):
     d = draw(clip_cfg(EFFECT, clip, stage), [stage])[stage]
     assert_truth(d, clip)
