@@ -30,6 +30,7 @@ from bench_sim.config.lighting import LIGHT_KINDS, LightConfig
 from bench_sim.config.plausible import plausibility_error
 from bench_sim.config.serialise import config_to_toml_dict
 from bench_sim.errors import BenchSimError, ConfigWarning
+from bench_sim.io.input_files import input_file_problem
 
 __all__ = [
     "SCENES_DIR",
@@ -74,12 +75,12 @@ def read_toml(path: Path, label: str, what: str = "a config") -> dict[str, Any]:
     Raises
     ------
     ConfigError
-        One line: a folder, no such file, unreadable, not UTF-8, NUL bytes or not valid TOML.
+        One line: no such file, a folder or a special file (a FIFO, a device), unreadable, not
+        UTF-8, NUL bytes or not valid TOML.
     """
-    if path.is_dir():
-        raise ConfigError(f"{label}: is a folder, not a TOML file")
-    if not path.is_file():
-        raise ConfigError(f"{label}: no such file")
+    problem = input_file_problem(path)  # missing, a folder, a FIFO or device (never opened)
+    if problem is not None:
+        raise ConfigError(f"{label}: {problem}")
     try:
         raw = path.read_bytes()
     except OSError as exc:

@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["MARGIN", "Typical", "TYPICAL", "typical_for", "plausibility_error"]
+__all__ = ["MARGIN", "Typical", "TYPICAL", "typical_for", "plausibility_error", "judge"]
 
 #: How far outside its typical range (a factor) a value may lie before it is refused.
 MARGIN = 10.0
@@ -109,7 +109,10 @@ def _guess(value: float, typ: Typical) -> str:
     return f"; did you mean {min(fits)[1]}?" if fits else ""
 
 
-def _judge(key: str, value: Any, typ: Typical) -> str | None:
+def judge(key: str, value: Any, typ: Typical) -> str | None:
+    """The unit-slip line of ``key = value`` against the typical range ``typ`` (``None`` when
+    the value is plausible, zero, or not a finite number): the check of every config key, and of
+    the physical quantities of other inputs (``bench-sim calibrate``'s exposure times)."""
     if typ.vector:
         if not isinstance(value, list | tuple):
             return None
@@ -154,7 +157,7 @@ def plausibility_error(data: Any) -> str | None:
         else:
             entries = [(pattern, table.get(rest[0]))]
         for key, value in entries:
-            problem = _judge(key, value, typ) if value is not None else None
+            problem = judge(key, value, typ) if value is not None else None
             if problem:
                 return problem
     return None

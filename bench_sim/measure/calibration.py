@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from bench_sim.config.plausible import Typical, judge
 from bench_sim.errors import BenchSimError
 from bench_sim.metrics.emva1288 import LINEAR_FIT_FRACTION, photons_min_model, snr_curve
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2
@@ -58,9 +59,13 @@ __all__ = [
     "wls_line",
     "fit_camera",
     "MIN_LINEAR_POINTS",
+    "EXPOSURE_TYPICAL",
     "QUANTIZATION_LIMIT_DN2",
 ]
 
+#: Typical exposure time of an EMVA 1288 measurement: a value more than 10 times outside is
+#: refused as a unit slip (milliseconds written as seconds), as a config's keys are.
+EXPOSURE_TYPICAL = Typical(1e-6, 1.0, "s")
 #: Fewest levels in the linear range for a fit with a standard error.
 MIN_LINEAR_POINTS = 5
 #: EMVA 1288: below this dark variance [DN^2] the dark noise is limited by quantisation and
@@ -121,7 +126,8 @@ def _dark_for(
 
 
 def _check_rows(cols: dict[str, np.ndarray], lit: np.ndarray, source: str) -> None:
-    """Refuse negative values, too few lit rows, a decreasing exposure, non-increasing photons."""
+    """Refuse negative values, an exposure time of 0 or in the wrong unit, too few lit rows, a
+    decreasing exposure, non-increasing photons."""
     for name in ("var_dn2", "dark_var_dn2", "photons_per_pixel", "exposure_s"):
         if name in cols and (cols[name] < 0).any():
             i = int(np.flatnonzero(cols[name] < 0)[0])
@@ -129,6 +135,17 @@ def _check_rows(cols: dict[str, np.ndarray], lit: np.ndarray, source: str) -> No
             raise BenchSimError(
                 f"{source}: row {i + 1}: {name} = {cols[name][i]:g} < 0: {what} cannot be negative"
             )
+    t = cols["exposure_s"]
+    if (t == 0).any():
+        i = int(np.flatnonzero(t == 0)[0])
+        raise BenchSimError(
+            f"{source}: row {i + 1}: exposure_s = 0: every level (dark rows too) is measured over an "
+            "exposure time > 0 s"
+        )
+    for i, value in enumerate(t):
+        slip = judge("exposure_s", float(value), EXPOSURE_TYPICAL)
+        if slip:
+            raise BenchSimError(f"{source}: row {i + 1}: {slip}")
     if lit.size < 3:
         raise BenchSimError(f"{source}: {lit.size} lit rows (photons_per_pixel > 0): need at least 3")
     tl, ph = cols["exposure_s"][lit], cols["photons_per_pixel"]
@@ -144,6 +161,19 @@ def _check_rows(cols: dict[str, np.ndarray], lit: np.ndarray, source: str) -> No
         raise BenchSimError(
             f"{source}: row {i + 1}: photons_per_pixel = {ph[i]:g} does not increase over the row before "
             "(lit levels must be listed in increasing irradiation)"
+        )
+
+
+def _check_above_dark(mean: np.ndarray, dark: np.ndarray, lit: np.ndarray, source: str) -> None:
+    """Refuse a lit level whose mean lies below its dark level (swapped columns, or the dark
+    pair of another exposure): its signal ``mu_y - mu_y.dark`` would be negative."""
+    below = np.flatnonzero(mean < dark)
+    if below.size:
+        j = int(below[0])
+        raise BenchSimError(
+            f"{source}: row {int(lit[j]) + 1}: mean_dn = {mean[j]:g} below its dark level {dark[j]:g} DN: a "
+            "lit level cannot be darker than the dark (mean_dn and dark_mean_dn swapped, or the dark "
+            "rows of another exposure time?)"
         )
 
 
@@ -201,6 +231,7 @@ def make_table(
     else:
         dt, dm, dv = cols["exposure_s"][dark], cols["mean_dn"][dark], cols["var_dn2"][dark]
         pairs = np.array([_dark_for(float(x), dt, dm, dv, source) for x in tl])
+    _check_above_dark(cols["mean_dn"][lit], pairs[:, 0], lit, source)
     ut = np.unique(dt)
     dark_levels = np.array([_dark_for(float(x), dt, dm, dv, source) for x in ut]).reshape(-1, 2)
     return PtcTable(

@@ -12,7 +12,6 @@ and writes the :class:`xarray.Dataset` as Zarr, NetCDF or TIFF (:func:`write_sim
 
 from __future__ import annotations
 
-import json
 import warnings
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
@@ -23,6 +22,7 @@ import numpy as np
 from bench_sim.config import BenchConfig, load_config, warn_config, with_overrides
 from bench_sim.errors import BenchSimError
 from bench_sim.io import output_set, write_json
+from bench_sim.io.strict_json import strict_dumps
 from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges, sharpness_summary
 from bench_sim.pipeline import (
     IMAGE_DIMS,
@@ -210,7 +210,7 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
 
     def put(name: str, arr: np.ndarray, var: Variable, stage: int | None) -> None:
         info = {"variable": var.name, "stage": stage, "units": var.units, "long_name": var.doc}
-        desc = json.dumps({**meta, **info}, sort_keys=True, default=str)
+        desc = strict_dumps({**meta, **info}, sort_keys=True, default=str)
         dtype = tiff_dtype(var)
         tifffile.imwrite(folder / name, np.asarray(arr).astype(dtype), description=desc, metadata=None)
         files[name] = {**info, "dtype": np.dtype(dtype).name}

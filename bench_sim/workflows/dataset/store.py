@@ -24,6 +24,7 @@ from bench_sim.config import config_sha256, config_to_toml_text
 from bench_sim.errors import BenchSimError
 from bench_sim.io import atomic_path, check_output_dir, umask, write_csv, write_json
 from bench_sim.io.ownership import entries, refuse_foreign, remove_listed
+from bench_sim.io.strict_json import strict_dumps
 from bench_sim.runtime.provenance import provenance
 from bench_sim.version import __version__
 from bench_sim.workflows.dataset.coordinates import constant_attrs, physical_coords, variable_attrs
@@ -323,7 +324,7 @@ def write_manifest(
 
     df = manifest_frame(spec, read_records(out), values)
     table = pa.Table.from_pandas(df, preserve_index=False)
-    provenance = json.dumps(meta, sort_keys=True, default=str).encode()
+    provenance = strict_dumps(meta, sort_keys=True, default=str).encode()
     table = table.replace_schema_metadata({**(table.schema.metadata or {}), b"bench_sim": provenance})
     with atomic_path(out / MANIFEST_PARQUET) as tmp:
         pq.write_table(table, tmp)
