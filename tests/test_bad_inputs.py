@@ -228,6 +228,9 @@ BAD_FILES: list[tuple[str, Callable[[Path], Path], list[str]]] = [
     ("base loop", _base_loop, ["loops back"]),
     ("folder", lambda f: (f / "adir.toml").mkdir() or f / "adir.toml", ["adir.toml", "folder"]),
     ("missing", lambda f: f / "missing.toml", ["missing.toml", "no such file"]),
+    # special files: named as such (before: "no such file"; a FIFO is never opened, it would wait)
+    ("fifo", lambda f: os.mkfifo(f / "pipe.toml") or f / "pipe.toml", ["pipe.toml", "a FIFO (named pipe)"]),
+    ("device", lambda f: Path("/dev/zero"), ["/dev/zero", "a character device"]),
 ]
 
 

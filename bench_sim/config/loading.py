@@ -273,10 +273,17 @@ def warn_config(cfg: BenchConfig, source: str) -> None:
 
 def load_config(path: str | Path | None = None) -> BenchConfig:
     """Load and validate a bench config from TOML (default: ``scenes/paper_rig.toml``); its odd
-    but legal settings are warned about (:func:`config_warnings`)."""
+    but legal settings are warned about (:func:`config_warnings`), and so is a file with no
+    settings at all (it runs the defaults, the paper rig)."""
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     p = p.resolve()
-    return config_from_dict(_read_config_file(p), source=str(p), warn=True)
+    data = _read_config_file(p)
+    if not data:  # an empty file (or comments only): legal, but say what it runs
+        warnings.warn(
+            f"{p}: no settings (an empty file): it runs the defaults, the paper rig "
+            f"({DEFAULT_CONFIG_PATH.name})", ConfigWarning, stacklevel=2,
+        )
+    return config_from_dict(data, source=str(p), warn=True)
 
 
 def with_overrides(cfg: BenchConfig, overrides: dict[str, Any], source: str = "<overrides>") -> BenchConfig:
