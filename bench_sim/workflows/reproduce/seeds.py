@@ -32,9 +32,10 @@ __all__ = [
 
 #: Most seeds one ``reproduce --seeds`` runs (more: several runs with their own ``--seed``)
 MAX_SEEDS = 1000
-#: Pixel reads per second of a seed's pass, fusion, chain DR and metrics, for the time estimate
-#: (about what 2 cores do: the quick preset's 18 M reads in about 4 s)
-PIXEL_READS_PER_S = 5e6
+#: Pixel reads per second of a further seed's pass, fusion, chain DR and metrics, for the time
+#: estimate: about what 2 cores do (measured: the paper rig's 115 M reads in about 13 s a seed,
+#: the quick preset's 18 M in about 1.1 s)
+PIXEL_READS_PER_S = 1e7
 #: Estimated run time [s] above which ``--seeds`` is warned about
 LONG_RUN_S = 600.0
 

@@ -51,6 +51,7 @@ from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import OUTPUT_MARKER, write_json
 from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries, listed_files, remove_listed
+from bench_sim.io.strict_json import strict_json
 from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.runtime.provenance import provenance
@@ -110,9 +111,10 @@ def _value_of(cfg: BenchConfig, key: str) -> Any:
 
 
 def _record(plan: SweepPlan, task: PointTask, outcome: TaskOutcome) -> dict[str, Any]:
-    """The journal record of a finished point."""
+    """The journal record of a finished point, as strict JSON holds it (a non-finite metric, e.g.
+    the SNR of a noise-free patch, is ``None``): the same in memory as read back on ``--resume``."""
     point = plan.spec.points[task.index]
-    return {
+    return strict_json({
         "point": task.index,
         "values": {k: _value_of(point.cfg, k) for k in plan.spec.keys},
         "varied": point.varied,
@@ -125,7 +127,7 @@ def _record(plan: SweepPlan, task: PointTask, outcome: TaskOutcome) -> dict[str,
         "wall_s": outcome.wall_s,
         "worker": outcome.worker,
         "metrics": outcome.value if outcome.ok else {},
-    }
+    })
 
 
 def _meta(
