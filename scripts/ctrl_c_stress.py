@@ -17,6 +17,11 @@ Each run must end within ``--timeout`` seconds of the signal, and
   with no other line than those of the run without a signal (warnings), no traceback and no
   ``Fatal Python error``;
 * when it had finished: exit status 0 and a complete output;
+* when bench_sim had not started yet (the interpreter's own start-up, before bench_sim's first
+  statement installs its handlers: seen from the process's ``SigCgt`` mask): not 0, nothing
+  written; how Python itself ends is its own (SIGTERM: killed by the signal; SIGINT: its
+  ``KeyboardInterrupt`` traceback, or "Fatal Python error: init_import_site" and 1 while it
+  imports ``site``), or the handled outcome above if the handlers came in between;
 * always: no temporary (``.partial-``, ``.old-``) and no lock file left, an output folder that
   is complete (its completion record) or absent, or for ``sweep``/``dataset`` a folder of
   finished records to ``--resume``; no process of the run's session still alive 15 s later
@@ -156,6 +161,16 @@ class Outcome:
     ok: bool
     what: str
     finished_first: bool = False
+    before_start: bool = False
+
+
+def _catches(pid: int, sig: int) -> bool:
+    """Whether process ``pid`` has a handler for ``sig`` (its ``SigCgt`` mask)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return bool(int(status.split("SigCgt:")[1].split()[0], 16) >> (sig - 1) & 1)
 
 
 def _leftovers(folder: Path, out: Path, command: str) -> list[str]:
@@ -178,6 +193,9 @@ def signalled_run(
     proc = _start(command, specs, out)
     time.sleep(delay_s)
     running = proc.poll() is None
+    # bench_sim's first statement installs its SIGINT and SIGTERM handlers together; before it,
+    # in the interpreter's own start-up, a signal has its default action
+    early = running and not _catches(proc.pid, signal.SIGTERM)
     if running:
         try:
             if sig == signal.SIGINT:
@@ -207,6 +225,9 @@ def signalled_run(
         elif not (out / ".bench-sim-output.json").is_file():
             problems.append("finished before the signal without a complete output")
         return Outcome(not problems, "; ".join(problems) or "finished first", finished_first=True)
+    if early and proc.returncode != 0:  # the interpreter's own start-up: its own ending
+        problems += _leftovers(folder, out, command)
+        return Outcome(not problems, "; ".join(problems) or "before bench_sim started", before_start=True)
     if proc.returncode != STATUS[sig]:
         problems.append(f"exit {proc.returncode}, not {STATUS[sig]}")
     if not lines or not lines[-1].startswith(LINE[sig]):
@@ -244,7 +265,7 @@ def stress(command: str, n: int, rng: random.Random, window_s: float | None, tim
             window = 1.1 * plain
         else:
             plain, allowed, window = float("nan"), [], window_s
-        failures = finished = 0
+        failures = finished = early = 0
         counts = {signal.SIGINT: 0, signal.SIGTERM: 0}
         t0 = time.perf_counter()
         for i in range(n):
@@ -252,14 +273,16 @@ def stress(command: str, n: int, rng: random.Random, window_s: float | None, tim
             delay = rng.uniform(0.0, window)
             with tempfile.TemporaryDirectory(prefix="run-", dir=tmp) as run_dir:
                 res = signalled_run(command, specs, Path(run_dir), sig, delay, timeout_s, allowed)
-            counts[sig] += not res.finished_first
+            counts[sig] += not (res.finished_first or res.before_start)
             finished += res.finished_first
+            early += res.before_start
             if not res.ok:
                 failures += 1
                 name = signal.Signals(sig).name
                 print(f"{command} run {i}: {name} at {delay:.2f} s: {res.what}", flush=True)
         line = (f"{command}: {n - failures} of {n} runs stopped cleanly ({counts[signal.SIGINT]} SIGINT, "
-                f"{counts[signal.SIGTERM]} SIGTERM while running, {finished} finished first; window "
+                f"{counts[signal.SIGTERM]} SIGTERM while running, {finished} finished first, {early} before "
+                f"bench_sim's first statement; window "
                 f"{window:.1f} s, run without a signal {plain:.1f} s; {time.perf_counter() - t0:.0f} s)")
         print(line, flush=True)
         report.append(line)
