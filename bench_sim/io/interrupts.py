@@ -168,6 +168,10 @@ def _import_safe(redelivery: _Redelivery) -> Any:
     return handler
 
 
+def _ignore_unraisable(unraisable: Any) -> None:
+    """``sys.unraisablehook`` once the command has ended: nothing more is said."""
+
+
 def _late(signum: int, frame: FrameType | None) -> None:
     leave_now(signum, " as the command ended")
 
@@ -201,9 +205,11 @@ def command_signals() -> Iterator[None]:
         finally:
             _install(_late)
             leave_if_pending(" as the command ended")  # one that came during a last import
-            # nor a warning after the command's own lines (a coroutine of an interrupted write
-            # collected while the process exits)
+            # nor a warning or an "Exception ignored" after the command's own lines (a coroutine
+            # of an interrupted write, or an object half-made when the signal came, collected
+            # while the process exits)
             warnings.simplefilter("ignore")
+            sys.unraisablehook = _ignore_unraisable
         return
     previous = _install(_import_safe(_redelivery()))
     try:
