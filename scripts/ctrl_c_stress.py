@@ -101,7 +101,8 @@ def write_specs(folder: Path) -> None:
 
 
 def _env() -> dict[str, str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONWARNINGS": "default"}
+    # faulthandler: a hung run is sent SIGABRT and dumps every thread's stack before it is killed
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONWARNINGS": "default", "PYTHONFAULTHANDLER": "1"}
     env.pop("BENCH_SIM_DEBUG", None)
     return env
 
@@ -207,9 +208,15 @@ def signalled_run(
     try:
         _, err = proc.communicate(timeout=timeout_s)
     except subprocess.TimeoutExpired:
+        os.kill(proc.pid, signal.SIGABRT)  # faulthandler's dump of every thread, then abort
+        try:
+            _, err = proc.communicate(timeout=20)
+        except subprocess.TimeoutExpired:
+            _kill_session(proc.pid)
+            _, err = proc.communicate()
         _kill_session(proc.pid)
-        proc.communicate()
-        return Outcome(False, f"hung (alive {timeout_s:g} s after the signal)")
+        dump = " | ".join(ln.strip() for ln in err.splitlines()[-60:])
+        return Outcome(False, f"hung (alive {timeout_s:g} s after the signal); its stacks: {dump}")
     problems = []
     t_end = time.monotonic()
     while _session_alive(proc.pid) and time.monotonic() - t_end < 15:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -174,6 +175,39 @@ def test_ctrl_c_while_the_local_cluster_starts_is_delivered_when_the_start_ends(
     assert not list(out.glob("points/*.json"))
     time.sleep(1.0)
     assert not ctrl_c_stress._session_alive(proc.pid)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", ["sweep", "dataset"])
+def test_ctrl_c_after_the_points_still_says_what_is_kept(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: str
+) -> None:
+    """Ctrl-C once every point (sample) is done, while the cluster closes or the last files are
+    written: the line says what is kept and how to finish (before: "no partial output was left",
+    while the folder held every finished record)."""
+    from typer.testing import CliRunner
+
+    from bench_sim.cli import app
+    from bench_sim.workflows.dataset import run as dataset_run
+    from bench_sim.workflows.sweep import run as sweep_run
+
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    if command == "sweep":
+        monkeypatch.setattr(sweep_run, "write_outputs", interrupted)
+        kept = r"4 of 4 points finished are kept in .*; finish with 'bench-sim sweep .* --resume'"
+    else:
+        monkeypatch.setattr(dataset_run, "write_card", interrupted)
+        kept = r"4 of 4 samples complete are kept in .*; finish with 'bench-sim dataset .* --resume'"
+    ctrl_c_stress.write_specs(tmp_path)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, [command, str(tmp_path / f"{command}.toml"), "--out", str(out),
+                                   "--workers", "0", *(["--no-plots"] if command == "sweep" else [])])
+    assert res.exit_code == 130, res.output
+    lines = _lines(res.stderr)
+    assert len(lines) == 1, lines
+    assert re.match(rf"bench-sim: interrupted: stopped by Ctrl-C; {kept}", lines[0]), lines
 
 
 # --- 4. the stress series, reduced ---------------------------------------------------------------

@@ -246,24 +246,28 @@ def _run_and_write(
     lost cluster) says what is kept and how to resume."""
     todo = plan.todo
     records: dict[int, dict[str, Any]] = {}
+    opened = False
     # the cluster is reached (or started) before anything is written: an unreachable scheduler
     # leaves no output behind
-    with open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext() as client:
-        sessions, records = _open_folder(plan, workers, scheduler)
-        try:
+    cluster = open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext()
+    try:
+        with cluster as client:
+            sessions, records = _open_folder(plan, workers, scheduler)
+            opened = True
             if todo:
                 _run_points(plan, client, records, progress, on_point)
-        except BaseException as exc:
+        totals = _totals(plan, records)
+        write_outputs(plan.out, plan, records, sessions, plots=plots)
+        write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
+                                                  "complete_with_failures", sessions, totals))
+        write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals,
+                                              "files": entries(plan.out)})
+    except BaseException as exc:
+        if opened:  # while the points run, the cluster closes or the outputs are written
             ok = sum(1 for r in records.values() if r["status"] == "ok")
             note_kept(exc, f"{ok} of {len(plan.tasks)} points finished are kept in {plan.out}; finish with "
                            f"'bench-sim sweep {spec_path} --out {plan.out} --resume'")
-            raise
-    totals = _totals(plan, records)
-    write_outputs(plan.out, plan, records, sessions, plots=plots)
-    write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
-                                              "complete_with_failures", sessions, totals))
-    write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals,
-                                          "files": entries(plan.out)})
+        raise
     return records
 
 
