@@ -210,6 +210,35 @@ def test_ctrl_c_after_the_points_still_says_what_is_kept(
     assert re.match(rf"bench-sim: interrupted: stopped by Ctrl-C; {kept}", lines[0]), lines
 
 
+@pytest.mark.slow
+def test_a_signal_during_the_netcdf_write_is_held_until_it_ends(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """SIGTERM as ``sweep.nc`` starts to be written: the write completes (whole and readable)
+    and the signal is delivered just after it. Cut inside xarray and HDF5, it left their locks
+    held, and the store's own close then waited for ever (the hang the stress series found)."""
+    import xarray as xr
+    from typer.testing import CliRunner
+
+    from bench_sim.cli import app
+
+    real = xr.Dataset.to_netcdf
+
+    def signalled(self: xr.Dataset, *args: object, **kwargs: object) -> object:
+        signal.raise_signal(signal.SIGTERM)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", signalled)
+    ctrl_c_stress.write_specs(tmp_path)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["sweep", str(tmp_path / "sweep.toml"), "--out", str(out),
+                                   "--workers", "0", "--no-plots"])
+    assert res.exit_code == 143, res.output
+    assert _lines(res.stderr)[-1].startswith("bench-sim: terminated: stopped by SIGTERM; 4 of 4 points")
+    with xr.open_dataset(out / "sweep.nc") as ds:  # the 2 x 2 grid of the spec, whole
+        assert dict(ds.sizes) == {"lights.strong.irradiance_w_m2": 2, "lights.weak.irradiance_w_m2": 2}
+
+
 # --- 4. the stress series, reduced ---------------------------------------------------------------
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from bench_sim.config import BenchConfig, load_config, warn_config, with_overrides
 from bench_sim.errors import BenchSimError
 from bench_sim.io import output_set, write_json
+from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.io.strict_json import strict_dumps
 from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges, sharpness_summary
 from bench_sim.pipeline import (
@@ -194,13 +195,16 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
     ImageDescription tag, plus ``meta.json`` (provenance, units, file list and, with slanted
     edges, the MTF50s of :func:`bench_sim.measure.sharpness.sharpness_summary`).
     """
+    # never cut by Ctrl-C (held, then delivered): Zarr writes on its own thread, and the locks of
+    # xarray and HDF5 an interruption leaves held would deadlock the store's close
     if fmt == "zarr":
-        with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
+        with warnings.catch_warnings(), deferred_interrupts():  # consolidated: a Zarr v3 extension
             warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
             ds.to_zarr(folder / FORMATS["zarr"], mode="w-", zarr_format=3, consolidated=True)
         return [FORMATS["zarr"]]
     if fmt == "netcdf":
-        ds.to_netcdf(folder / FORMATS["netcdf"])
+        with deferred_interrupts():
+            ds.to_netcdf(folder / FORMATS["netcdf"])
         return [FORMATS["netcdf"]]
     if fmt != "tiff":
         raise BenchSimError(f"--format = {fmt!r}: allowed {', '.join(FORMATS)}")
