@@ -38,7 +38,7 @@ from bench_sim.errors import BenchSimError, kept_note
 from bench_sim.fusion.methods import FUSE_METHODS
 from bench_sim.fusion.tonemap import TONEMAP_METHODS
 from bench_sim.io import format_bytes
-from bench_sim.io.interrupts import Terminated, command_signals
+from bench_sim.io.interrupts import Terminated, command_signals, signal_raised
 from bench_sim.render import record_store
 from bench_sim.runtime.backend import choose_backend, versions
 from bench_sim.runtime.resources import available_memory_bytes
@@ -85,6 +85,8 @@ def _one_line_warnings() -> Iterator[None]:
     seen: set[str] = set()
 
     def show(message: Any, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        if issubclass(category, ResourceWarning) and signal_raised():
+            return  # a socket or file the interrupted step left open: collected while it unwinds
         text = str(message).removeprefix("bench_sim: ")
         if text not in seen:
             seen.add(text)

@@ -52,6 +52,7 @@ __all__ = [
     "leave_now",
     "own_process_signals",
     "signal_exception",
+    "signal_raised",
 ]
 
 #: The signals held back: Ctrl-C and the polite termination request
@@ -138,6 +139,15 @@ class _Redelivery:
 
 
 _REDELIVERY: _Redelivery | None = None
+#: the signals raised as exceptions in this process so far
+_RAISED: list[int] = []
+
+
+def signal_raised() -> bool:
+    """Whether a signal has been raised as its exception in this process (the run is being
+    interrupted): what the interrupted step leaves open is then not reported."""
+    return bool(_RAISED)
+
 #: whether this process is ``bench-sim`` itself (own_process_signals was called)
 _OWN_PROCESS = False
 
@@ -163,6 +173,7 @@ def _import_safe(redelivery: _Redelivery) -> Any:
             redelivery.later(signum)
             return
         redelivery.since.pop(signum, None)
+        _RAISED.append(signum)
         raise signal_exception(signum)
 
     return handler
@@ -199,6 +210,7 @@ def command_signals() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    _RAISED.clear()  # a new command: nothing interrupted yet
     if _OWN_PROCESS:
         try:
             yield
