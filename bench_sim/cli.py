@@ -42,12 +42,12 @@ from bench_sim.io.interrupts import Terminated, command_signals, signal_raised
 from bench_sim.render import record_store
 from bench_sim.runtime.backend import choose_backend, versions
 from bench_sim.runtime.resources import available_memory_bytes
+from bench_sim.workflows import area_ptc_job, config_cmd, mtf_cmd, ptc_job, render_job, simulate_summary
 from bench_sim.workflows import calibrate as calibrate_workflow
-from bench_sim.workflows import config_cmd, ptc_job, render_job, simulate_summary
 from bench_sim.workflows import fuse as fuse_workflow
-from bench_sim.workflows import mtf as mtf_workflow
 from bench_sim.workflows import simulate as simulate_workflow
 from bench_sim.workflows.dataset import run as dataset_run
+from bench_sim.workflows.design.command import design_command
 from bench_sim.workflows.reproduce import run as reproduce_run
 from bench_sim.workflows.sweep import export as sweep_export
 from bench_sim.workflows.sweep import run as sweep_run
@@ -297,11 +297,10 @@ def ptc(
     stages: Annotated[str, typer.Option("--stages", help="e.g. 1,10,80, 5:100:5 or all")] = "1,10,80",
     seed: SeedOpt = 0,
     out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/ptc"),
+    area: Annotated[bool, typer.Option("--area", help=area_ptc_job.AREA_HELP)] = False,
 ) -> None:
     """Photon-transfer series through the sensor and DTDI: EMVA 1288 files and results."""
-    cfg = load_config(config)
-    chosen = list(simulate_workflow.parse_stages_arg(stages, cfg.sensor.rows))
-    ptc_job.run_ptc(cfg, stages=chosen, seed=seed, out=out)
+    ptc_job.run_ptc_command(load_config(config), stages, seed, out, area=area)
 
 
 @app.command()
@@ -338,27 +337,6 @@ def fuse(
     print(f"method {meta['method']}; pedestal subtracted: {meta['pedestal_source']}; "
           f"{meta['pixels_from_clipped_high']} pixels from a clipped Gamma2; wrote {out}"
           + (f" and {tra}" if tra else ""))
-
-
-@app.command()
-def mtf(
-    image: Annotated[Path, typer.Argument(help="image with a slanted edge (TIFF/PNG, EXR or NPY), linear")],
-    roi: Annotated[
-        str | None, typer.Option("--roi", help="x0,y0,x1,y1: the edge's region [px, ends exclusive]; "
-                                 "default: the whole image")
-    ] = None,
-    pixel_pitch_um: Annotated[
-        float | None, typer.Option("--pixel-pitch-um", help="pixel pitch [um], for cycles/mm")
-    ] = None,
-    saturation: Annotated[
-        float | None, typer.Option("--saturation", help="value at which the camera clips (default: a "
-                                   "full 8..16-bit word when the ROI reaches one)")
-    ] = None,
-    out: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/mtf"),
-) -> None:
-    """ISO 12233 slanted-edge SFR of an image: sfr.csv, sfr.png and summary.json in DIR."""
-    s = mtf_workflow.run_mtf(image, out=out, roi=roi, pixel_pitch_um=pixel_pitch_um, saturation=saturation)
-    print(mtf_workflow.summary_line(s, out))
 
 
 @app.command()
@@ -472,6 +450,8 @@ def calibrate(
 # ``bench-sim config keys|show`` and ``bench-sim init`` (their arguments live with the workflow)
 app.add_typer(config_cmd.config_app, name="config")
 app.command("init")(config_cmd.init_command)
+app.command("mtf")(mtf_cmd.mtf_command)
+app.command("design")(design_command)  # bench-sim design SPEC.toml --out DIR (its arguments live with it)
 
 
 def main() -> None:  # pragma: no cover

@@ -56,8 +56,10 @@ def _rss_series(samples: int) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         spec = load_spec(_spec(Path(tmp), samples))
         for i in range(samples):
-            cfg = spec.sample_config(spec.draw(i), i)
-            make_sample(SampleTask(i, cfg, spec.stages, sample_streams(spec.seed, i)[1]))
+            values = spec.draw(i)
+            scene = {k.removeprefix("scene."): v for k, v in values.items() if k.startswith("scene.")}
+            cfg = spec.sample_config(values, i)
+            make_sample(SampleTask(i, cfg, spec.stages, sample_streams(spec.seed, i)[1], None, scene))
             if i % 8 == 7 or i == samples - 1:
                 pages = int(Path("/proc/self/statm").read_text().split()[1])
                 mib = pages * os.sysconf("SC_PAGE_SIZE") / 2**20
@@ -99,7 +101,7 @@ def main() -> None:
         print_rates(sides, times, first, n, "samples")
         store = tmp / "a_0" / "data.zarr"
         on_disk = sum(f.stat().st_size for f in store.rglob("*") if f.is_file())
-        raw = bytes_per_sample(2, 256, 256, True)
+        raw = bytes_per_sample(load_spec(spec))
         print(f"  bytes per sample on disk (this checkout): {on_disk / n / 2**20:.2f} MiB "
               f"(uncompressed arrays {raw / 2**20:.2f} MiB, ratio {on_disk / n / raw:.2f})")
     finally:

@@ -497,7 +497,8 @@ BAD_IMAGES: list[tuple[str, Callable[[Path], Path], list[str]]] = [
     ("complex npy", _npy("c.npy", np.zeros((4, 5), np.complex64)), ["c.npy", "complex64"]),
     ("bool npy", _npy("b.npy", np.zeros((4, 5), bool)), ["b.npy"]),
     ("empty file", _write("e.tif", b""), ["e.tif"]),
-    ("jpeg suffix", _write("x.jpg", b"\xff\xd8\xff"), ["x.jpg", "unsupported"]),
+    ("gif suffix", _write("x.gif", b"GIF89a"), ["x.gif", "unsupported"]),
+    ("truncated jpeg", _write("x.jpg", b"\xff\xd8\xff"), ["x.jpg", "cannot read image"]),
     ("folder", lambda f: (f / "d.npy").mkdir() or f / "d.npy", ["d.npy"]),
 ]
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
 import json
 import re
 import subprocess
@@ -69,12 +70,18 @@ def test_own_imports_at_the_top(path: Path) -> None:
 #: the roles of a workflow package's modules (``workflows/sweep/spec.py``, ``workflows/dataset/spec.py``):
 #: the same name in each workflow package, and nowhere else
 WORKFLOW_ROLES = {"spec", "run", "report"}
+#: public modules at the top of the package that present the workflow package of the same name
+#: (``bench_sim.dataset``: ``from bench_sim.dataset import iter_batches``), and nothing else
+PUBLIC_FACADES = {"dataset.py": "workflows/dataset"}
 
 
 def test_module_names_unique() -> None:
     names: Counter[str] = Counter()
     for p in SOURCES:
         if p.name == "__main__.py" or p == PACKAGE / "__init__.py":
+            continue
+        if p.parent == PACKAGE and p.name in PUBLIC_FACADES:
+            assert (PACKAGE / PUBLIC_FACADES[p.name] / "__init__.py").is_file(), p
             continue
         name = p.parent.name if p.name == "__init__.py" else p.stem
         in_workflow_package = p.parent.parent.name == "workflows" and p.name != "__init__.py"
@@ -125,8 +132,69 @@ def _resolves(dotted: str) -> bool:
     return False
 
 
+#: endings of the file names the docs quote (``manifest.csv``, ``paper_rig.toml``)
+FILE_SUFFIXES = {"py", "toml", "md", "json", "csv", "png", "zarr", "nc", "tiff", "tif", "exr", "npy", "npz",
+                 "parquet", "txt", "xml", "sh", "tex"}
+#: libraries whose dotted names the docs quote (checked when installed)
+LIBRARIES = {"numpy", "pandas", "xarray", "torch", "dask", "os", "scipy", "zarr", "mitsuba", "drjit"}
+#: dotted names in the docs that are notation, not code or config (EMVA 1288's symbols)
+NOTATION = {"mu_e.sat", "mu_p.sat", "mu_y.dark", "sigma_y.dark"}  # EMVA 1288 symbols
+_SPAN = re.compile(r"`([^`\n]+)`")
+_FENCE = re.compile(r"^```.*?^```", re.M | re.S)
+_DOTTED = re.compile(r"(?<![\w./-])([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+)(?![\w/])")
+
+
+def _config_names() -> set[str]:
+    from bench_sim.config.catalogue import config_keys
+
+    keys = {k.key for k in config_keys()}
+    return keys | {".".join(k.split(".")[:i]) for k in keys for i in range(1, k.count(".") + 1)}
+
+
+def _effect_key_ok(name: str) -> bool:
+    """``sensor.effects.<name>.<key>``: a key of some sensor effect (``bench-sim config keys sensor``)."""
+    from bench_sim.workflows.config_cmd import effect_keys
+
+    parts = name.split(".")
+    if len(parts) != 4 or parts[:2] != ["sensor", "effects"]:
+        return False
+    return parts[3] in {k.key.rsplit(".", 1)[1] for k in effect_keys()}
+
+
+def _dotted_name_ok(name: str, config: set[str]) -> bool:
+    """A dotted name of the docs, with or without ``bench_sim.``: a module or attribute of bench_sim
+    (``workflows.dataset.splits.split_of`` as well), a config key or table, a file name, a
+    library's name, or notation."""
+    if name.startswith("bench_sim."):
+        return _resolves(name)
+    first, last = name.split(".")[0], name.rsplit(".", 1)[1]
+    if last.lower() in FILE_SUFFIXES or name in config or name in NOTATION or _effect_key_ok(name):
+        return True
+    if first in LIBRARIES:
+        return _resolves(name) or importlib.util.find_spec(first) is None
+    return _resolves(f"bench_sim.{name}")
+
+
+@pytest.mark.parametrize("name, ok", [
+    ("experiments.execution.task_seed_sequence", False),  # a module that no longer exists
+    ("runtime.execution.task_seed_sequence", True),
+    ("bench_sim.runtime.execution.no_such_name", False),
+    ("lights.strong.irradiance_w_m2", True),
+    ("lights.strong.flux", False),
+    ("sensor.effects.knee.compression", True),  # a key of a sensor effect
+    ("sensor.effects.knee.flux", False),
+    ("manifest.csv", True),
+    ("numpy.random.no_such_name", False),
+])
+def test_dotted_names_are_judged(name: str, ok: bool) -> None:
+    assert _dotted_name_ok(name, _config_names()) == ok
+
+
 def test_documented_names_resolve() -> None:
-    """Every ``bench_sim.x.y`` that the README and docs/ name is a module or attribute that exists."""
+    """Every ``bench_sim.x.y`` that the README and docs/ name is a module or attribute that exists,
+    and so is every dotted name in their code spans without the prefix (``experiments.execution.x``
+    named a module that no longer exists): a config key, a file name or a library's name
+    otherwise."""
     root = PACKAGE.parent
     docs = [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
     bad = sorted(
@@ -136,6 +204,12 @@ def test_documented_names_resolve() -> None:
         if not _resolves(name)
     )
     assert not bad, f"documented names that do not exist: {bad}"
+    config = _config_names()
+    spans = {d: [n for span in _SPAN.findall(_FENCE.sub("", d.read_text())) for n in _DOTTED.findall(span)]
+             for d in docs}
+    bad = sorted({f"{d.relative_to(root)}: {n}" for d, names in spans.items() for n in names
+                  if not _dotted_name_ok(n, config)})
+    assert not bad, f"dotted names in the docs that are no module, attribute, config key or file: {bad}"
     paths = sorted(
         f"{d.relative_to(root)}: {p}"
         for d in docs
@@ -156,5 +230,5 @@ def test_public_api() -> None:
         "print(json.dumps([light, sorted(names), *api]))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    public = ["__version__", "calibrate", "dataset", "load_config", "run_pass", "simulate"]
+    public = ["__version__", "calibrate", "dataset", "design", "load_config", "run_pass", "simulate"]
     assert json.loads(out) == [True, public, True, True]

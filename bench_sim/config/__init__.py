@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from bench_sim.config.bench import BenchConfig, config_warnings
 from bench_sim.config.lighting import (
+    BUILTIN_LIGHT_SPECTRA,
     FLICKER_WAVEFORMS,
     LIGHT_KINDS,
     AreaLightConfig,
@@ -63,6 +64,7 @@ from bench_sim.config.schema import (
     BETA_BITS_MIN,
     DrumConfig,
     DTDIConfig,
+    EffectEntry,
     FusionConfig,
     LensConfig,
     RenderConfig,
@@ -88,7 +90,9 @@ __all__ = [
     "LightConfig",
     "LightsConfig",
     "LIGHT_KINDS",
+    "BUILTIN_LIGHT_SPECTRA",
     "FLICKER_WAVEFORMS",
+    "EffectEntry",
     "SensorConfig",
     "TimingConfig",
     "DTDIConfig",

@@ -105,8 +105,16 @@ def config_warnings(cfg: BenchConfig) -> list[str]:
       [DN] (the ADC top, or the full well ``FW`` [e-] converted with the gain ``K`` [DN/e-] above
       the black offset ``b``, whichever comes first), less ``b`` when it is subtracted; a bench
       whose pixel saturates below the ADC top is not warned about the ADC's range.
+    - a measured spectrum of the print or the sensor named in a mono bench, which renders at
+      ``sensor.wavelength_m`` alone and does not use it.
     """
     out: list[str] = []
+    if not cfg.render.spectral:
+        named = [k for k, v in (("target.reflectance_spectrum", cfg.target.reflectance_spectrum),
+                                ("sensor.qe_spectrum", cfg.sensor.qe_spectrum)) if v is not None]
+        if named:
+            out.append(f"{', '.join(named)} set, but render.spectral = false: a mono bench renders at "
+                       "sensor.wavelength_m alone and does not use it (set render.spectral = true)")
     s, d = cfg.sensor, cfg.dtdi
     room = d.word_clip_dn - d.pedestal_dn
     signal_dn = s.conversion_gain_dn_per_e * s.pixel_saturation_electrons  # min(ADC top - b, K FW)

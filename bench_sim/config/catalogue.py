@@ -13,7 +13,7 @@ from __future__ import annotations
 import re
 import types
 import typing
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -22,10 +22,13 @@ from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
 
 from bench_sim.config.bench import BenchConfig
-from bench_sim.config.lighting import LightConfig
-from bench_sim.config.plausible import typical_for
+from bench_sim.config.lighting import BUILTIN_LIGHT_SPECTRA, LightConfig
+from bench_sim.config.plausible import Typical, typical_for
+from bench_sim.io.spectral_data import CSV_PREFIX, spectrum_names
 
-__all__ = ["KeyInfo", "UNIT_SUFFIXES", "unit_of", "config_keys", "config_sections"]
+__all__ = [
+    "KeyInfo", "UNIT_SUFFIXES", "SPECTRUM_KEYS", "unit_of", "config_keys", "config_sections", "model_keys",
+]
 
 #: Units carried by key names (longest suffix first).
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (
@@ -43,6 +46,23 @@ UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (
     ("_e", "e-"),
     ("_k", "K"),
 )
+
+
+#: the keys that take a measured spectrum by name, and its kind (:mod:`bench_sim.io.spectral_data`);
+#: every light's ``spectrum`` is listed with the names once, at ``lights.strong.spectrum``
+SPECTRUM_KEYS = {"lights.strong.spectrum": "light", "target.reflectance_spectrum": "reflectance",
+                 "sensor.qe_spectrum": "qe"}
+
+
+def _spectrum_allowed(key: str) -> str:
+    """``allowed`` of a key that names a spectrum: the built-in ones, ``csv:FILE`` and the names
+    (those of a light other than ``strong`` by reference)."""
+    builtin = ", ".join(BUILTIN_LIGHT_SPECTRA) + ", " if key.startswith("lights.") else ""
+    kind = SPECTRUM_KEYS.get(key)
+    if kind is None:
+        return f"{builtin}{CSV_PREFIX}FILE or a name of lights.strong.spectrum"
+    names = spectrum_names(kind)
+    return f"{builtin}{CSV_PREFIX}FILE or one of the {len(names)} names: " + "; ".join(names)
 
 
 @dataclass(frozen=True)
@@ -129,24 +149,36 @@ def _model_of(ann: Any) -> type[BaseModel] | None:
     return None
 
 
-def _walk(model: type[BaseModel], prefix: str) -> Iterator[KeyInfo]:
+def model_keys(
+    model: type[BaseModel], prefix: str, typical: Callable[[str], Typical | None] | None = None
+) -> Iterator[KeyInfo]:
+    """The keys of ``model`` (and of the tables it nests) as :class:`KeyInfo`, each named
+    ``prefix + name``; ``typical`` gives a key's typical range (default: the config's,
+    :func:`bench_sim.config.plausible.typical_for`)."""
+    return _walk(model, prefix, typical)
+
+
+def _walk(
+    model: type[BaseModel], prefix: str, typical: Callable[[str], Typical | None] | None = None
+) -> Iterator[KeyInfo]:
     for name, field in model.model_fields.items():
         key = f"{prefix}{name}"
         sub = _model_of(field.annotation)
         if sub is not None:
-            yield from _walk(sub, key + ".")
+            yield from _walk(sub, key + ".", typical)
             if sub.model_config.get("extra") == "allow":  # the lights: any other name, any kind
                 for kind_model in typing.get_args(LightConfig):
                     kind = kind_model.model_fields["kind"].default
                     yield from _walk(kind_model, f"{key}.<name>[kind={kind}].")
             continue
-        typ = typical_for(re.sub(r"\[kind=\w+\]", "", key))
+        typ = (typical or typical_for)(re.sub(r"\[kind=\w+\]", "", key))
+        spectral = key in SPECTRUM_KEYS or (key.startswith("lights.") and name == "spectrum")
         yield KeyInfo(
             key=key,
             type=_type_name(field.annotation),
             unit=unit_of(name),
-            default=_toml(field.default),
-            allowed=_allowed(field.metadata, field.annotation),
+            default=_toml(field.get_default(call_default_factory=True)),
+            allowed=_spectrum_allowed(key) if spectral else _allowed(field.metadata, field.annotation),
             typical=typ.describe() if typ is not None else "",
             description=" ".join((field.description or "").split()),
         )

@@ -7,11 +7,13 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal
 
-from pydantic import ConfigDict, Field, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from bench_sim.config.schema import Fraction, PositiveFloat, Section, Vec3
+from bench_sim.io.spectral_data import spectrum_name_problem
 
 __all__ = [
+    "BUILTIN_LIGHT_SPECTRA",
     "LIGHT_KINDS",
     "FLICKER_WAVEFORMS",
     "RESERVED_LIGHT_NAMES",
@@ -39,6 +41,9 @@ FLICKER_WAVEFORMS: dict[str, str] = {
     "rectified_sine": "w = 1 - depth + depth * (pi / 2) * |sin(pi f t + phase / 2)| (a lamp on "
     "mains of frequency f / 2)",
 }
+#: A light's spectra in closed form (``spectrum``); any other value names a measured one
+#: (:mod:`bench_sim.io.spectral_data`).
+BUILTIN_LIGHT_SPECTRA = ("flat", "blackbody")
 #: Names a light cannot take (other objects of the Mitsuba scene).
 RESERVED_LIGHT_NAMES = ("integrator", "sensor", "drum", "drum_body", "drum_caps", "axle", "mounts", "bench")
 _LIGHT_NAME = re.compile(r"[a-z][a-z0-9_]*")
@@ -56,7 +61,11 @@ class _LightBase(Section):
 
     enabled: bool = True
     irradiance_w_m2: Annotated[float, Field(ge=0)] = 1.0
-    spectrum: Literal["flat", "blackbody"] = Field("flat", description="spectral mode only")
+    spectrum: str = Field(
+        "flat", description="spectral mode: 'flat', 'blackbody' (at temperature_k), a measured light "
+        "by name (A: halogen; FL1..FL12: fluorescent; LED-B1..: white LEDs; lamps; the names are under "
+        "allowed) or csv:FILE (wavelength_nm and one value column, relative to the config file)",
+    )
     temperature_k: Annotated[float, Field(ge=500, le=20000)] = 3200.0
     flicker_hz: Annotated[float, Field(ge=0, le=1e9)] = Field(
         0.0, description="frequency of the intensity modulation [Hz]; 0: steady (100/120 Hz: a lamp "
@@ -70,6 +79,15 @@ class _LightBase(Section):
     flicker_phase_rad: Annotated[float, Field(ge=-1e6, le=1e6)] = Field(
         0.0, description="phase of the modulation at t = 0 (start of frame 0) [rad of its period]"
     )
+
+    @field_validator("spectrum")
+    @classmethod
+    def _spectrum_name(cls, value: str) -> str:
+        if value not in BUILTIN_LIGHT_SPECTRA:
+            problem = spectrum_name_problem("light", value)
+            if problem is not None:
+                raise ValueError(f"{problem} (or one of {', '.join(BUILTIN_LIGHT_SPECTRA)})")
+        return value
 
     @property
     def flickers(self) -> bool:

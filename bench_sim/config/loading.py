@@ -229,15 +229,65 @@ def _deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+#: ``(section, key)`` of the keys that name a file, resolved against the config file naming them
+FILE_KEYS = (("target", "image"), ("lens", "mtf_file"), ("lens", "psf_file"))
+#: ``(section, key)`` of the keys that may name a spectrum's file as ``csv:FILE`` (``lights``: every
+#: light's ``spectrum``)
+SPECTRUM_FILE_KEYS = (("target", "reflectance_spectrum"), ("sensor", "qe_spectrum"), ("lights", "spectrum"))
+
+
+def _resolve_files(data: dict[str, Any], folder: Path) -> None:
+    """The file names of ``data`` (:data:`FILE_KEYS`, :data:`SPECTRUM_FILE_KEYS`) made absolute
+    against ``folder``, the config file's, in place."""
+    tables: list[tuple[dict[str, Any], str, bool]] = []
+    for section, key in (*((s, k) for s, k in FILE_KEYS), *SPECTRUM_FILE_KEYS):
+        table = data.get(section)
+        if not isinstance(table, dict):
+            continue
+        csv = (section, key) in SPECTRUM_FILE_KEYS
+        if section == "lights":
+            tables += [(t, key, True) for t in table.values() if isinstance(t, dict)]
+        else:
+            tables.append((table, key, csv))
+    for table, key, csv in tables:
+        name = table.get(key)
+        if not isinstance(name, str) or not name:
+            continue
+        prefix = "csv:" if csv else ""
+        if csv and not name.startswith(prefix):
+            continue
+        file = name[len(prefix):].strip()
+        if file and not Path(file).is_absolute():
+            table[key] = prefix + str((folder / file).resolve())
+#: keys of a sensor effect that name a file (relative to the config that writes them)
+EFFECT_FILE_KEYS = ("table", "map_file")
+
+
+def _resolve_effect_files(data: dict[str, Any], folder: Path) -> None:
+    """The files a config's sensor effects name (a response table, a defect map, a plug-in's
+    ``file.py:function``), made absolute against ``folder`` (the config's own)."""
+    effects = data.get("sensor", {}).get("effects") if isinstance(data.get("sensor"), dict) else None
+    for entry in (effects or {}).values() if isinstance(effects, dict) else ():
+        if not isinstance(entry, dict):
+            continue
+        for key in EFFECT_FILE_KEYS:
+            if isinstance(entry.get(key), str) and entry[key] and not Path(entry[key]).is_absolute():
+                entry[key] = str((folder / entry[key]).resolve())
+        fn = entry.get("function")
+        if isinstance(fn, str) and ".py:" in fn:
+            file, _, name = fn.rpartition(":")
+            if not Path(file).is_absolute():
+                entry["function"] = f"{(folder / file).resolve()}:{name}"
+
+
 def _read_config_file(path: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
-    """A config file's settings, merged over its ``base`` chain; ``target.image`` resolved
-    against the file that names it."""
+    """A config file's settings, merged over its ``base`` chain; the file keys (:data:`FILE_KEYS`)
+    resolved against the file that names them."""
     if path in chain:
         raise ConfigError(f"config error: {path}: 'base' chain loops back to itself")
     data = read_toml(path, f"config error: {path}")
-    image = data.get("target", {}).get("image") if isinstance(data.get("target"), dict) else None
-    if isinstance(image, str) and image and not Path(image).is_absolute():
-        data["target"]["image"] = str((path.parent / image).resolve())  # relative to this file
+    _resolve_files(data, path.parent)
+    _resolve_effect_files(data, path.parent)
     base = data.pop("base", None)
     if base is None:
         return data

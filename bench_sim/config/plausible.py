@@ -60,6 +60,7 @@ TYPICAL: dict[str, Typical] = {
     "lens.focal_length_m": Typical(4e-3, 0.6, "m"),
     "lens.working_distance_m": Typical(0.02, 10.0, "m"),
     "lens.focus_distance_m": Typical(0.02, 10.0, "m"),
+    "lens.psf_pixel_m": Typical(5e-8, 2e-5, "m"),
     "sensor.pixel_pitch_m": Typical(1e-6, 5e-5, "m"),
     "sensor.wavelength_m": Typical(3e-7, 1.1e-6, "m"),
     "sensor.full_well_e": Typical(1e3, 1e6, "e-"),

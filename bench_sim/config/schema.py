@@ -12,11 +12,13 @@ properties of that section: the one place of each formula.
 
 from __future__ import annotations
 
+import re
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from bench_sim.config.variants import check_variant_name
+from bench_sim.io.spectral_data import spectrum_name_problem
 
 __all__ = [
     "Section",
@@ -31,6 +33,8 @@ __all__ = [
     "LensConfig",
     "TargetConfig",
     "SensorConfig",
+    "EffectEntry",
+    "EFFECT_NAME",
     "TimingConfig",
     "DTDIConfig",
     "RenderConfig",
@@ -103,7 +107,22 @@ class LensConfig(Section):
     )
     transmission: Annotated[float, Field(gt=0, le=1)] = 0.90
     cos4_falloff: bool = True
-    diffraction_psf: bool = Field(False, description="convolve the focal plane with an Airy PSF")
+    diffraction: bool = Field(
+        True, description="blur by the diffraction of the lens' round aperture (the OTF of an "
+        "aberration-free lens at the working f-number f_number (1 + m), at sensor.wavelength_m; "
+        "per wavelength of render.band_m in spectral mode), applied before the sensor; false: a "
+        "perfect lens (the images of bench_sim 0.3)",
+    )
+    mtf_file: str | None = Field(
+        None, description="a measured lens MTF instead of diffraction: CSV of frequency_cyc_mm (on "
+        "the sensor) and mtf, or mtf_sagittal and mtf_tangential (tangential: across the track), "
+        "relative to the config file",
+    )
+    psf_file: str | None = Field(
+        None, description="a lens PSF instead of diffraction: a grey image (NPY, TIFF, EXR, PNG) "
+        "sampled every psf_pixel_m on the sensor, relative to the config file",
+    )
+    psf_pixel_m: PositiveFloat | None = Field(None, description="psf_file's sample spacing on the sensor")
 
     @model_validator(mode="after")
     def _focus_beyond_focal_length(self) -> LensConfig:
@@ -117,6 +136,16 @@ class LensConfig(Section):
                 f"focus_distance_m = {self.focus_distance_m} must exceed focal_length_m = "
                 f"{self.focal_length_m}"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _lens_files(self) -> LensConfig:
+        if self.mtf_file and self.psf_file:
+            raise ValueError("mtf_file and psf_file are both set: give one measured lens, not two")
+        if self.psf_file and self.psf_pixel_m is None:
+            raise ValueError("psf_file needs psf_pixel_m, the PSF image's sample spacing on the sensor [m]")
+        if self.psf_pixel_m is not None and not self.psf_file:
+            raise ValueError("psf_pixel_m is set without psf_file (the PSF image it describes)")
         return self
 
     @property
@@ -162,6 +191,11 @@ class TargetConfig(Section):
         "(glints; reference engine only)",
     )
     gloss_roughness: Annotated[float, Field(gt=0, le=1)] = 0.1
+    reflectance_spectrum: str | None = Field(
+        None, description="spectral mode: the print's reflectance spectrum, times the pattern's "
+        "reflectance (1: the spectrum itself): a chart patch by name (ColorChecker N Ohta/dark skin, "
+        "...; the names are under allowed) or csv:FILE (a print's or paper's spectrum); default: grey",
+    )
     # layout = "image" and the generated layouts (bench_sim.rig.target_sources)
     image: str | None = Field(
         None,
@@ -203,6 +237,14 @@ class TargetConfig(Section):
             )
         return self
 
+    @field_validator("reflectance_spectrum")
+    @classmethod
+    def _reflectance_name(cls, value: str | None) -> str | None:
+        problem = None if value is None else spectrum_name_problem("reflectance", value)
+        if problem is not None:
+            raise ValueError(problem)
+        return value
+
     @model_validator(mode="after")
     def _sources(self) -> TargetConfig:
         if self.layout == "image" and not self.image:
@@ -221,6 +263,26 @@ class TargetConfig(Section):
 
 
 
+#: Names of the sensor's effects (``[sensor.effects.<name>]``): lower-case identifiers
+EFFECT_NAME = re.compile(r"[a-z][a-z0-9_]*")
+
+
+class EffectEntry(BaseModel):
+    """One effect of the sensor's chain, ``[sensor.effects.<name>]``: its ``kind`` (a built-in
+    effect, or ``"plugin"`` for a function of your own) and its parameters.
+
+    The parameters are checked by the effect itself (:mod:`bench_sim.sensor.effects`: names,
+    units, ranges, unit slips), when the chain is built, before anything runs;
+    ``bench-sim config keys sensor`` lists every kind with its keys.
+    """
+
+    model_config = ConfigDict(extra="allow", frozen=True, allow_inf_nan=False, defer_build=True)
+
+    kind: str = Field(description="the effect: a built-in kind (bench-sim config keys sensor lists them) "
+                      "or 'plugin'")
+    enabled: bool = Field(True, description="false: the effect is left out of the chain")
+
+
 class SensorConfig(Section):
     """Area CMOS sensor: geometry and EMVA 1288 (Release 4) pixel model.
 
@@ -236,6 +298,11 @@ class SensorConfig(Section):
         None,
         description="spectral mode: (wavelength_m, relative QE) pairs, scaled so that QE at "
         "wavelength_m is quantum_efficiency; default: a front-side-illuminated CMOS curve",
+    )
+    qe_spectrum: str | None = Field(
+        None, description="spectral mode: a measured spectral response by name (a camera's channel: "
+        "Nikon 5100 (NPL)/green, ...; the names are under allowed) or csv:FILE, instead of qe_curve; its "
+        "shape, scaled so that QE at wavelength_m is quantum_efficiency",
     )
     full_well_e: PositiveFloat = 13500.0
     read_noise_e: Annotated[float, Field(ge=0)] = 13.0
@@ -266,6 +333,33 @@ class SensorConfig(Section):
     dsnu_enabled: bool = True
     column_fpn: bool = True
     quantization: bool = True
+    effects: dict[str, EffectEntry] = Field(
+        default_factory=dict,
+        description="further effects of the pixel chain, [sensor.effects.<name>] tables with a kind "
+        "(non-linearity, defect pixels, offset pattern, row noise, your own function): each acts at "
+        "its point of the signal path, in the order written (bench_sim.sensor.effects)",
+    )
+
+    @model_validator(mode="after")
+    def _effect_names(self) -> SensorConfig:
+        for name in self.effects:
+            if not EFFECT_NAME.fullmatch(name):
+                raise ValueError(f"sensor.effects.{name}: use a lower-case identifier (letters, digits, _)")
+        return self
+
+    @field_validator("qe_spectrum")
+    @classmethod
+    def _qe_name(cls, value: str | None) -> str | None:
+        problem = None if value is None else spectrum_name_problem("qe", value)
+        if problem is not None:
+            raise ValueError(problem)
+        return value
+
+    @model_validator(mode="after")
+    def _one_qe(self) -> SensorConfig:
+        if self.qe_curve is not None and self.qe_spectrum is not None:
+            raise ValueError("qe_curve and qe_spectrum are both set: give one QE curve")
+        return self
 
     @model_validator(mode="after")
     def _black_below_adc_top(self) -> SensorConfig:

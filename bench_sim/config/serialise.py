@@ -13,8 +13,12 @@ __all__ = ["config_to_toml_dict", "config_to_toml_text", "config_sha256"]
 
 
 def config_to_toml_dict(cfg: BenchConfig) -> dict[str, Any]:
-    """The fully resolved config as a JSON/TOML-friendly dict (``None`` values dropped)."""
-    return cfg.model_dump(mode="json", exclude_none=True)
+    """The fully resolved config as a JSON/TOML-friendly dict (``None`` values dropped; a sensor
+    without extra effects has no ``sensor.effects`` table)."""
+    data = cfg.model_dump(mode="json", exclude_none=True)
+    if not data["sensor"].get("effects"):
+        data["sensor"].pop("effects", None)
+    return data
 
 
 def config_sha256(cfg: BenchConfig) -> str:

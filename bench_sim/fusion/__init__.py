@@ -1,6 +1,9 @@
 """Fusion stage: stage images [DN] -> HDR image [DN, top-stage units] -> display image.
 
 * :mod:`bench_sim.fusion.paper` - the paper's rule, eq. 11 (:func:`fuse_dtdi_hdr_eq11`).
+* :mod:`bench_sim.fusion.stage_pair` - eq. 11 of one bench's two stage words with their offsets
+  removed (:func:`fuse_stage_words`, what every workflow fuses with), the true HDR target
+  (:func:`true_hdr_dn`) and eq. 11 of the expected words (:func:`eq11_expected_dn`).
 * :mod:`bench_sim.fusion.methods` - the two-stage rules by name (``eq11``, ``clip``), :data:`FUSE_METHODS`.
 * :mod:`bench_sim.fusion.multistage` - more than two stages (highest unsaturated stage) and the
   inverse-variance merge.
@@ -16,6 +19,13 @@ from bench_sim.fusion.multistage import (
     fuse_stages_inverse_variance,
 )
 from bench_sim.fusion.paper import eq11_threshold_dn, fuse_dtdi_hdr_eq11
+from bench_sim.fusion.stage_pair import (
+    eq11_expected_dn,
+    eq11_signal_threshold_dn,
+    fuse_stage_words,
+    stage_offsets_dn,
+    true_hdr_dn,
+)
 from bench_sim.fusion.tonemap import TONEMAP_METHODS, gamma_tra, quantize_display, tone_map
 
 __all__ = [
@@ -25,6 +35,11 @@ __all__ = [
     "fuse_pair",
     "eq11_threshold_dn",
     "fuse_dtdi_hdr_eq11",
+    "fuse_stage_words",
+    "stage_offsets_dn",
+    "eq11_signal_threshold_dn",
+    "true_hdr_dn",
+    "eq11_expected_dn",
     "fuse_stages_highest_unsaturated",
     "fuse_stages_inverse_variance",
     "merge_debevec_opencv",

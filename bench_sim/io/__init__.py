@@ -19,9 +19,14 @@ Modules
 :mod:`~bench_sim.io.images`
     EXR, TIFF, PNG and NPY images: writers, the one reader and the one input-file check.
 :mod:`~bench_sim.io.tables`
-    CSV files with provenance lines, Markdown tables.
+    CSV files with provenance lines (and numeric CSV tables read), Markdown tables.
+:mod:`~bench_sim.io.spectral_data`
+    Measured spectra by name from colour-science, or from CSV files.
 :mod:`~bench_sim.io.emva_descriptor`
     The EMVA 1288 descriptor file.
+:mod:`~bench_sim.io.frame_stacks`
+    Stacks of raw frames of an EMVA 1288 measurement in one ``.npz`` (``ptc --area`` writes it,
+    ``calibrate`` reads it).
 :mod:`~bench_sim.io.folder_lock`
     One writer per output folder: the advisory lock a long run holds on its ``--out``.
 :mod:`~bench_sim.io.interrupts`
@@ -40,6 +45,7 @@ from bench_sim.io.files import (
     write_json,
     write_text,
 )
+from bench_sim.io.frame_stacks import read_frames_npz, write_frames_npz
 from bench_sim.io.images import (
     ImageReadError,
     check_image_file,
@@ -47,8 +53,10 @@ from bench_sim.io.images import (
     image_shape,
     read_exr,
     read_image,
+    read_image_channel,
     read_image_data,
     read_png_text,
+    srgb_to_linear,
     write_exr,
     write_figure_png,
     write_png,
@@ -63,7 +71,7 @@ from bench_sim.io.outputs import (
     output_set,
     read_output_record,
 )
-from bench_sim.io.tables import markdown_table, write_csv
+from bench_sim.io.tables import markdown_table, read_csv_columns, write_csv
 
 __all__ = [
     "atomic_path",
@@ -88,8 +96,13 @@ __all__ = [
     "read_png_text",
     "write_text",
     "write_csv",
+    "read_csv_columns",
     "write_emva_descriptor",
+    "write_frames_npz",
+    "read_frames_npz",
     "read_image",
+    "read_image_channel",
+    "srgb_to_linear",
     "read_image_data",
     "check_image_file",
     "image_file_problem",

@@ -1,4 +1,5 @@
-"""Image files: OpenEXR, 16-bit TIFF, PNG (arrays and matplotlib figures) and NPY.
+"""Image files: OpenEXR, 16-bit TIFF, PNG (arrays and matplotlib figures) and NPY; BMP and JPEG
+are read.
 
 Every image written carries its provenance as a JSON attribute: the EXR header attribute
 ``bench_sim``, the TIFF ImageDescription, the PNG ``tEXt`` chunk ``bench_sim``.
@@ -6,7 +7,9 @@ Every image written carries its provenance as a JSON attribute: the EXR header a
 Reading: :func:`check_image_file` is the one check of an input image file (it exists, has a
 supported suffix, can be read); :func:`read_image_data` the one reader (the pixels as stored
 and, for EXR, the channel names), used by :func:`read_image` (one channel as float64: the stage
-images of ``bench-sim fuse``) and by the target images of :mod:`bench_sim.rig.target_sources`.
+images of ``bench-sim fuse``), by :func:`read_image_channel` (one channel of a grey or colour
+image, or its ISO 12233 luminance: ``bench-sim mtf``) and by the target images of
+:mod:`bench_sim.rig.target_sources`.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +31,8 @@ from bench_sim.io.strict_json import strict_dumps
 
 __all__ = [
     "IMAGE_SUFFIXES",
+    "IMAGE_CHANNELS",
+    "ISO12233_LUMA",
     "ImageReadError",
     "PNG_COMPRESS_LEVEL",
     "check_image_file",
@@ -34,7 +40,10 @@ __all__ = [
     "image_shape",
     "read_exr",
     "read_image",
+    "read_image_channel",
     "read_image_data",
+    "ChannelImage",
+    "srgb_to_linear",
     "read_png_text",
     "write_exr",
     "write_figure_png",
@@ -43,7 +52,12 @@ __all__ = [
 ]
 
 #: suffixes (lower case) of the image files read
-IMAGE_SUFFIXES = (".tif", ".tiff", ".png", ".exr", ".npy")
+IMAGE_SUFFIXES = (".tif", ".tiff", ".png", ".exr", ".npy", ".bmp", ".jpg", ".jpeg")
+#: the channels :func:`read_image_channel` takes: one of R, G, B, or Y, the luminance
+IMAGE_CHANNELS = ("R", "G", "B", "Y")
+#: luminance weights of R, G, B for the e-SFR of a colour image (ISO 12233:2014 and :2017, 6.2:
+#: ``Y = 0.2125 R + 0.7154 G + 0.0721 B``)
+ISO12233_LUMA = (0.2125, 0.7154, 0.0721)
 
 
 class ImageReadError(BenchSimError):
@@ -248,9 +262,31 @@ def read_image_data(path: str | os.PathLike[str]) -> tuple[np.ndarray, list[str]
         import tifffile
 
         return tifffile.imread(path), None
+    if suffix == ".png" and _png_is_16bit_colour(path):
+        return _read_png16_colour(path), None
     import imageio.v3 as iio
 
     return iio.imread(path, plugin="pillow"), None
+
+
+def _png_is_16bit_colour(path: Path) -> bool:
+    """Whether a PNG holds 16-bit RGB or RGBA (its IHDR chunk: bit depth 16, colour type 2 or
+    6), which Pillow reads as 8-bit."""
+    with open(path, "rb") as fh:
+        head = fh.read(26)
+    return len(head) == 26 and head[24] == 16 and head[25] in (2, 6)
+
+
+def _read_png16_colour(path: Path) -> np.ndarray:
+    """A 16-bit RGB(A) PNG as (H, W, 3 or 4) uint16 in R, G, B(, A) order (OpenCV reads all 16
+    bits; it gives B, G, R(, A))."""
+    import cv2
+
+    arr = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if arr is None or arr.ndim != 3:
+        raise ValueError("OpenCV could not decode the 16-bit colour PNG")
+    order = [2, 1, 0, 3][: arr.shape[2]]
+    return np.ascontiguousarray(arr[..., order])
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
@@ -276,6 +312,107 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     return arr.astype(np.float64)
 
 
+def _channel_names(arr: np.ndarray, names: list[str] | None) -> tuple[np.ndarray, list[str]]:
+    """``(H, W, C)`` pixels and their channel names: an EXR's own, R, G, B(, A) for 3 or 4
+    channels, else ``0``, ``1``, ...; a planar TIFF (C, H, W) is turned to (H, W, C)."""
+    if arr.ndim == 3 and names is None and arr.shape[0] in (3, 4) and arr.shape[-1] not in (3, 4):
+        arr = np.moveaxis(arr, 0, -1)
+    n = arr.shape[-1]
+    if names is None:
+        names = ["R", "G", "B", "A"][:n] if n in (3, 4) else [str(i) for i in range(n)]
+    return arr, names
+
+
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    """sRGB transfer function inverted (IEC 61966-2-1): encoded 0..1 -> linear 0..1."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+@dataclass(frozen=True)
+class ChannelImage:
+    """One channel of an image file (:func:`read_image_channel`).
+
+    Attributes
+    ----------
+    values
+        (H, W) float64: the file's values of the channel (linear encoding), or, decoded from sRGB,
+        linear 0..1 (integers divided by their type's largest value first).
+    raw_top
+        (H, W) float64: the largest stored value over the channels that make ``values`` (one, or
+        R, G, B for the luminance ``Y``), in the file's units: where a pixel clips.
+    integer_top
+        The largest value of the file's integer type (255, 65535, ...), ``None`` for floats.
+    channel
+        The channel read (``None``: a grey image), ``encoding`` how it was decoded.
+    """
+
+    values: np.ndarray
+    raw_top: np.ndarray
+    integer_top: int | None
+    channel: str | None
+    encoding: str
+
+
+def _select(
+    arr: np.ndarray, names: list[str] | None, channel: str | None, path: Path
+) -> tuple[np.ndarray, bool]:
+    """The stored planes behind ``channel``: (H, W) or, for the luminance ``Y``, (H, W, 3) R, G,
+    B; and whether they are R, G, B to be weighted."""
+    if arr.ndim == 3 and arr.shape[-1] == 1 and names is None:
+        arr = arr[..., 0]
+    if arr.ndim == 2:
+        return arr, False
+    if arr.ndim != 3:
+        raise ImageReadError(f"{path}: shape {arr.shape} is not an image (H, W) or (H, W, channels)")
+    arr, names = _channel_names(arr, names)
+    if len(names) == 1:
+        return arr[..., 0], False
+    if channel is None:
+        raise ImageReadError(f"{path}: a colour image (channels {', '.join(names)}): choose one with "
+                             "--channel R, G, B or Y (luminance)")
+    if channel in names:
+        return arr[..., names.index(channel)], False
+    if channel == "Y" and all(c in names for c in "RGB"):
+        return arr[..., [names.index(c) for c in "RGB"]], True
+    raise ImageReadError(f"{path}: no channel {channel!r} (the file has {', '.join(names)})")
+
+
+def read_image_channel(
+    path: str | os.PathLike[str], channel: str | None = None, encoding: str = "linear"
+) -> ChannelImage:
+    """One channel of an image file (:class:`ChannelImage`).
+
+    ``channel``: ``None`` for a single-channel (grey) image; for a colour image ``"R"``, ``"G"``,
+    ``"B"`` or ``"Y"``, the luminance ``0.2125 R + 0.7154 G + 0.0721 B`` (:data:`ISO12233_LUMA`;
+    of the decoded R, G, B; an EXR's own ``Y`` channel where it has one). A grey image has one
+    channel, which every ``channel`` names. ``encoding``: ``"linear"`` (the values as stored) or
+    ``"srgb"`` (decoded to linear 0..1). Formats as :func:`read_image_data`; raises
+    :class:`ImageReadError` (one line naming the file) otherwise, and for a colour image without
+    ``channel``.
+    """
+    path, _ = check_image_file(path)
+    if channel is not None and channel not in IMAGE_CHANNELS:
+        raise ImageReadError(f"--channel = {channel!r}: allowed {', '.join(IMAGE_CHANNELS)}")
+    if encoding not in ("linear", "srgb"):
+        raise ImageReadError(f"encoding = {encoding!r}: allowed 'linear', 'srgb'")
+    try:
+        arr, names = read_image_data(path)
+    except Exception as exc:
+        raise ImageReadError(f"{path}: cannot read image ({' '.join(str(exc).split())[:120]})") from exc
+    arr = np.asarray(arr)
+    is_int = np.issubdtype(arr.dtype, np.integer)
+    if not (is_int or np.issubdtype(arr.dtype, np.floating)):
+        raise ImageReadError(f"{path}: unsupported pixel type {arr.dtype}")
+    planes, rgb = _select(arr, names, channel, path)
+    raw = planes.astype(np.float64)
+    top = int(np.iinfo(arr.dtype).max) if is_int else None
+    vals = srgb_to_linear(raw / (top or 1)) if encoding == "srgb" else raw
+    if rgb:
+        vals = vals @ np.asarray(ISO12233_LUMA)
+    return ChannelImage(vals, raw.max(axis=-1) if rgb else raw, top, channel, encoding)
+
+
 def image_shape(path: str | os.PathLike[str]) -> tuple[int, ...]:
     """The array shape of an image file from its header, without decoding the pixels (for the
     up-front memory estimate). Same formats as :func:`read_image`; raises
@@ -289,7 +426,7 @@ def image_shape(path: str | os.PathLike[str]) -> tuple[int, ...]:
 
             with tifffile.TiffFile(path) as tif:
                 return tuple(tif.series[0].shape)
-        if suffix == ".png":
+        if suffix in (".png", ".bmp", ".jpg", ".jpeg"):
             from PIL import Image
 
             with Image.open(path) as img:

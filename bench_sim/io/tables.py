@@ -15,10 +15,13 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from bench_sim.errors import BenchSimError
 from bench_sim.io.files import write_text
 from bench_sim.io.strict_json import strict_dumps
 
-__all__ = ["comment_lines", "markdown_table", "write_csv"]
+__all__ = ["comment_lines", "markdown_table", "write_csv", "read_csv_columns"]
 
 #: separator cell of each column alignment of :func:`markdown_table`
 _ALIGN_RULES = {"l": "---", "r": "---:", "c": ":---:"}
@@ -88,3 +91,34 @@ def markdown_table(
     lines = [_md_row(list(header), compact_empty), "|" + "|".join(rules) + "|"]
     lines += [_md_row([fmt(c) for c in row], compact_empty) for row in rows]
     return lines
+
+
+def read_csv_columns(path: str | os.PathLike[str], label: str) -> dict[str, np.ndarray]:
+    """A CSV file of numbers as ``{column name: float64 array}``: ``#`` lines skipped, one header
+    row (names stripped, lower case), then rows of numbers, at least two. Anything else is one
+    :class:`~bench_sim.errors.BenchSimError` line that starts with ``label`` (how the caller names
+    the file) and says where."""
+    path = Path(path)
+    if not path.is_file():
+        raise BenchSimError(f"{label}: no such file")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise BenchSimError(f"{label}: cannot be read ({exc.__class__.__name__})") from None
+    lines = [line for line in text.splitlines() if line.strip() and not line.startswith("#")]
+    rows = list(csv.reader(lines))
+    if len(rows) < 3:
+        raise BenchSimError(f"{label}: needs a header row and at least two rows of numbers")
+    names = [c.strip().lower() for c in rows[0]]
+    values = []
+    for k, row in enumerate(rows[1:], start=2):
+        try:
+            values.append([float(c) for c in row])
+        except ValueError:
+            raise BenchSimError(f"{label}: row {k} ({','.join(row)!r}) is not all numbers") from None
+        if len(row) != len(names):
+            raise BenchSimError(f"{label}: row {k} has {len(row)} values, the header {len(names)} names")
+    arr = np.asarray(values, dtype=np.float64)
+    if not np.isfinite(arr).all():
+        raise BenchSimError(f"{label}: holds NaN or inf values")
+    return {n: arr[:, i] for i, n in enumerate(names)}

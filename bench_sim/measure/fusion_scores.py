@@ -1,12 +1,13 @@
 """Truth-scored fusion of one pass: eq. 11 and the clip-aware rule against the exact truth.
 
 For a pass run with its truth (``run_pass(..., truth=True)``) :func:`fusion_scores` fuses stages
-``fusion.mu1`` and ``fusion.mu2`` by eq. 11 (:func:`bench_sim.fusion.paper.fuse_dtdi_hdr_eq11`,
+``fusion.mu1`` and ``fusion.mu2`` by eq. 11 (:func:`bench_sim.fusion.stage_pair.fuse_stage_words`,
 the paper's rule) and by the highest unclipped stage
 (:func:`bench_sim.fusion.multistage.fuse_stages_highest_unsaturated`, ``criterion="clip"``, plain
 and with a noise margin below the clip), and
-scores both against the exact expected ``Gamma_HDR`` -- the stage-``mu2`` signal without any clip
-(``linear_dn`` less the stage's offset) -- with the functions of
+scores both against the true HDR target -- the stage-``mu2`` signal without any clip
+(:func:`bench_sim.fusion.stage_pair.true_hdr_dn`: ``linear_dn`` less the stage's offset) -- with
+the functions of
 :mod:`bench_sim.metrics.fusion_truth`: relative error per region (whole image, under the spot,
 under the fill, the spot's edge), the pixels taken from a clipped stage (by the truth's
 ``clipped``, and by the word at its top, the count anyone can redo from ``gamma1.tiff`` and
@@ -23,7 +24,9 @@ import numpy as np
 from bench_sim.config import BenchConfig
 from bench_sim.fusion.common import FusionResult
 from bench_sim.fusion.multistage import fuse_stages_highest_unsaturated
+from bench_sim.fusion.stage_pair import stage_offsets_dn, true_hdr_dn
 from bench_sim.metrics.fusion_truth import (
+    CLIP_MARGIN_SIGMAS,
     LIGHT_RATIO_TOLERANCE,
     error_summary,
     from_clipped_stage,
@@ -32,9 +35,9 @@ from bench_sim.metrics.fusion_truth import (
     tdi_light_ratio,
 )
 from bench_sim.pipeline import PassResult
-from bench_sim.sensor.model import dark_noise_e, stage_offset_dn, stage_variance_dn2, word_clip_dn
+from bench_sim.sensor.model import dark_noise_e, stage_variance_dn2, word_clip_dn
 
-__all__ = ["FusionScores", "fusion_scores", "RULES"]
+__all__ = ["FusionScores", "fusion_scores", "RULES", "clip_margin_dn"]
 
 #: the rules compared: name -> what the report calls it
 RULES = {
@@ -42,11 +45,9 @@ RULES = {
     "clip": "highest unclipped stage (clip-aware)",
     "clip_margin": "highest stage below its clip by a noise margin",
 }
-#: the margin of ``clip_margin``: standard deviations of the stage's temporal noise at its clip
-CLIP_MARGIN_SIGMAS = 4.0
 
 
-def _margin_dn(cfg: BenchConfig, m: int, top_signal_dn: float) -> float:
+def clip_margin_dn(cfg: BenchConfig, m: int, top_signal_dn: float) -> float:
     """:data:`CLIP_MARGIN_SIGMAS` temporal standard deviations [DN] of stage ``m`` at its clip
     (:func:`bench_sim.sensor.model.stage_variance_dn2`): a value this far below the clip is
     clipped in none of its noise draws but a fraction ``~3e-5``."""
@@ -100,7 +101,7 @@ def fusion_scores(cfg: BenchConfig, sim: PassResult, eq11: FusionResult) -> Fusi
     the draws that clipped, so the plain rule still takes biased values."""
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
     ds = sim.dataset
-    off = {m: stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2)}
+    off = stage_offsets_dn(cfg, (mu1, mu2))
     top = word_clip_dn(beta)
     words = {m: sim.stage_dn[m] for m in (mu1, mu2)}
     signal = {m: words[m].astype(np.float64) - off[m] for m in (mu1, mu2)}
@@ -109,9 +110,9 @@ def fusion_scores(cfg: BenchConfig, sim: PassResult, eq11: FusionResult) -> Fusi
     )
     margin_rule = fuse_stages_highest_unsaturated(
         signal, beta=beta, criterion="clip",
-        saturation_dn={m: top - off[m] - _margin_dn(cfg, m, top - off[m]) for m in (mu1, mu2)},
+        saturation_dn={m: top - off[m] - clip_margin_dn(cfg, m, top - off[m]) for m in (mu1, mu2)},
     )
-    truth = ds["linear_dn"].sel(stage=mu2).values - off[mu2]
+    truth = true_hdr_dn(cfg, ds["linear_dn"].sel(stage=mu2).values)
     photons = {m: ds["photons"].sel(stage=m).values for m in (mu1, mu2)}
     ratio = tdi_light_ratio(photons[mu1], photons[mu2], mu1, mu2)
     regions = illumination_regions(photons[mu2], ds["reflectance"].sel(stage=mu2).values, ratio)

@@ -78,6 +78,7 @@ __all__ = [
     "plan_ptc",
     "measure_ptc",
     "analyse_ptc",
+    "stage_quantization_var_dn2",
     "DEFAULT_LINES",
     "DEFAULT_COLUMNS",
     "DEFAULT_LOG_LEVELS",
@@ -301,18 +302,26 @@ def measure_ptc(cfg: BenchConfig, plan: PtcPlan, seed: int) -> PtcImages:
     )
 
 
+def stage_quantization_var_dn2(cfg: BenchConfig, stage: int) -> float:
+    """The rounding's variance in stage ``m``'s word [DN^2]: ``m`` pixel ADC roundings (``m / 12``),
+    or one of the output word (``1 / 12``) without pixel quantisation."""
+    return stage * QUANTIZATION_VAR_DN2 if cfg.sensor.quantization else QUANTIZATION_VAR_DN2
+
+
 def analyse_ptc(cfg: BenchConfig, plan: PtcPlan, images: PtcImages) -> dict[int, StageResult]:
     """EMVA 1288 analysis of every stage, with the model's expectations from the config."""
     s, t = cfg.sensor, cfg.timing.t_int_s
     out: dict[int, StageResult] = {}
     for m in plan.stages:
-        # quantisation noise of the stage: m pixel ADC roundings, or one of the output word
-        q_var = m * QUANTIZATION_VAR_DN2 if s.quantization else QUANTIZATION_VAR_DN2
+        q_var = stage_quantization_var_dn2(cfg, m)
         mv = np.array([mean_var_from_pair(a, b) for a, b in images.pairs[m]])
         dark_mean, dark_var = float(mv[0, 0]), float(mv[0, 1])
         mean, var = mv[1:, 0], mv[1:, 1]
         photons = m * plan.levels
-        res = analyse_photon_transfer(photons, mean, var, dark_mean, dark_var, quantization_var_dn2=q_var)
+        res = analyse_photon_transfer(
+            photons, mean, var, dark_mean, dark_var, quantization_var_dn2=q_var,
+            pixels=plan.lines * plan.columns, bits=cfg.dtdi.beta_bits, exposure_s=m * t,
+        )
         std = np.sqrt(np.maximum(var, 0.0))
         by_method = {
             meth: dynamic_range_from_series(

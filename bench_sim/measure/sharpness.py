@@ -38,14 +38,27 @@ from bench_sim.sensor.model import stage_offset_dn
 if TYPE_CHECKING:
     import xarray as xr
 
-__all__ = ["SFR_FREQUENCY_CYC_PX", "DIRECTIONS", "DirectionSFR", "direction_sfr", "has_slanted_edges",
-           "image_sharpness", "add_sharpness", "sharpness_summary"]
+__all__ = ["SFR_FREQUENCY_CYC_PX", "DIRECTIONS", "DirectionSFR", "StageImage", "direction_sfr",
+           "has_slanted_edges", "image_sharpness", "stage_images", "mean_curve", "add_sharpness",
+           "sharpness_summary", "sharpness_curves"]
 
 #: common frequency grid of the averaged SFRs [cycles/pixel], 0 .. 1 in steps of 1/50
 SFR_FREQUENCY_CYC_PX = np.linspace(0.0, 1.0, 51)
 #: direction -> the edge orientation that measures it
 DIRECTIONS = {"along": "horizontal", "across": "vertical"}
 _CLIPPED_MAX_FRACTION = 1e-3
+
+
+@dataclass(frozen=True)
+class StageImage:
+    """One image of a pass ready for the e-SFR (:func:`stage_images`): ``name`` (``stage_010``,
+    ``gamma_hdr``), ``stage`` (``m``; ``None`` for ``gamma_hdr``), the flat-fielded ``image``
+    (float64) and where it ``clipped`` (bool)."""
+
+    name: str
+    stage: int | None
+    image: np.ndarray
+    clipped: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -80,11 +93,18 @@ def direction_sfr(
             continue
         if r.orientation != orientation:
             continue
-        curves.append(np.interp(SFR_FREQUENCY_CYC_PX, r.frequency_cyc_px, r.sfr, right=np.nan))
+        curves.append(r)
+    return mean_curve([(r.frequency_cyc_px, r.sfr) for r in curves])
+
+
+def mean_curve(curves: Sequence[tuple[np.ndarray, np.ndarray]]) -> DirectionSFR:
+    """The SFRs ``(frequency [cycles/px], sfr)`` resampled onto :data:`SFR_FREQUENCY_CYC_PX`
+    and averaged, with the mean's MTF50 (NaN curve without any)."""
     if not curves:
         return DirectionSFR(np.full(SFR_FREQUENCY_CYC_PX.size, np.nan), float("nan"), 0)
-    mean = np.mean(curves, axis=0)
-    return DirectionSFR(mean, mtf50(SFR_FREQUENCY_CYC_PX, mean), len(curves))
+    grid = [np.interp(SFR_FREQUENCY_CYC_PX, f, s, right=np.nan) for f, s in curves]
+    mean = np.mean(grid, axis=0)
+    return DirectionSFR(mean, mtf50(SFR_FREQUENCY_CYC_PX, mean), len(grid))
 
 
 def image_sharpness(
@@ -114,6 +134,24 @@ def _light(ds: xr.Dataset, m: int) -> np.ndarray:
     return np.where(light > 0, light, 1.0)
 
 
+def stage_images(ds: xr.Dataset, cfg: BenchConfig) -> list[StageImage]:
+    """Every stage image of the pass ``ds`` of the bench ``cfg`` flat-fielded (the module
+    docstring: offset removed, divided by the light), then ``gamma_hdr`` when fused; without the
+    truth (``photons``, ``reflectance``) the light is taken as uniform."""
+    truth = "photons" in ds and "reflectance" in ds
+    out = []
+    for m in (int(v) for v in ds.stage.values):
+        light = _light(ds, m) if truth else 1.0
+        img = (ds["dn"].sel(stage=m).values - stage_offset_dn(cfg.sensor, cfg.dtdi, m)) / light
+        clip = ds["clipped"].sel(stage=m).values if "clipped" in ds else np.zeros(img.shape, dtype=bool)
+        out.append(StageImage(f"stage_{m:03d}", m, img, clip))
+    if "gamma_hdr" in ds:
+        light = _light(ds, cfg.fusion.mu2) if truth else 1.0
+        clip = _hdr_clipped(ds) if "clipped" in ds else np.zeros(ds["gamma_hdr"].shape, dtype=bool)
+        out.append(StageImage("gamma_hdr", None, ds["gamma_hdr"].values / light, clip))
+    return out
+
+
 def add_sharpness(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     """``ds`` (a pass's dataset with its truth, of the bench ``cfg``) with the e-SFR of every stage and of
     ``gamma_hdr`` in both directions added (module docstring); unchanged when its reflectance
@@ -129,13 +167,8 @@ def add_sharpness(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     rois = slanted_edge_rois(ds["reflectance"].isel(stage=0).values)
     if not rois:
         return ds
-    stages = [int(m) for m in ds.stage.values]
-    per_stage = [
-        image_sharpness(
-            (ds["dn"].sel(stage=m).values - stage_offset_dn(cfg.sensor, cfg.dtdi, m)) / _light(ds, m),
-            rois, ds["clipped"].sel(stage=m).values)
-        for m in stages
-    ]
+    images = stage_images(ds, cfg)
+    per_stage = [image_sharpness(s.image, rois, s.clipped) for s in images if s.stage is not None]
     new: dict[str, xr.DataArray] = {}
     for d in DIRECTIONS:
         side = "lines (along the track)" if d == "along" else "columns (across the track)"
@@ -146,7 +179,7 @@ def add_sharpness(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
             np.array([s[d].mtf50_cyc_px for s in per_stage]), dims=("stage",),
             attrs={"units": "cycles/px", "long_name": f"MTF50 along the {side}"})
     if "gamma_hdr" in ds:
-        hdr = image_sharpness(ds["gamma_hdr"].values / _light(ds, cfg.fusion.mu2), rois, _hdr_clipped(ds))
+        hdr = image_sharpness(images[-1].image, rois, images[-1].clipped)
         for d in DIRECTIONS:
             new[f"gamma_hdr_sfr_{d}"] = xr.DataArray(
                 hdr[d].sfr, dims=("sfr_frequency",),
@@ -178,3 +211,20 @@ def sharpness_summary(ds: xr.Dataset) -> dict[str, object]:
         if f"gamma_hdr_mtf50_{d}" in ds:
             out[f"gamma_hdr_mtf50_{d}_cyc_px"] = num(ds[f"gamma_hdr_mtf50_{d}"].values)
     return out
+
+
+def sharpness_curves(ds: xr.Dataset) -> list[list[object]]:
+    """The mean e-SFR curves of :func:`add_sharpness` as rows ``stage, direction,
+    frequency_cyc_px, sfr`` (``stage`` = ``gamma_hdr`` for the fused image; ``None`` for NaN);
+    ``[]`` when ``ds`` has none."""
+    if "sfr_along" not in ds:
+        return []
+    f = ds["sfr_frequency"].values
+    rows: list[list[object]] = []
+    curves = [(str(int(m)), d, ds[f"sfr_{d}"].sel(stage=m).values)
+              for m in ds.stage.values for d in DIRECTIONS]
+    curves += [("gamma_hdr", d, ds[f"gamma_hdr_sfr_{d}"].values)
+               for d in DIRECTIONS if f"gamma_hdr_sfr_{d}" in ds]
+    for label, d, sfr in curves:
+        rows += [[label, d, float(x), None if np.isnan(y) else float(y)] for x, y in zip(f, sfr, strict=True)]
+    return rows

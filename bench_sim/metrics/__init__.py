@@ -8,6 +8,9 @@
 * :mod:`bench_sim.metrics.emva1288` - EMVA 1288 R4 photon-transfer analysis (K, QE, saturation,
   ``mu_p.min``, measured dynamic range); its measurement and fit steps are in
   :mod:`bench_sim.metrics.photon_transfer`.
-* :mod:`bench_sim.metrics.sfr` - ISO 12233:2017 slanted-edge SFR (e-SFR), MTF50, MTF at Nyquist;
-  :mod:`bench_sim.metrics.edge_rois` finds the edges of a ``slanted_edges`` target.
+* :mod:`bench_sim.metrics.sfr` - ISO 12233:2017 slanted-edge SFR (e-SFR), MTF50, MTF at Nyquist
+  (its ROI and invalid pixels: :mod:`bench_sim.metrics.sfr_roi`; the readings, MTF50P and
+  sharpening: :mod:`bench_sim.metrics.sfr_readings`; many edges as a table:
+  :mod:`bench_sim.metrics.sfr_table`); :mod:`bench_sim.metrics.edge_rois` finds the edges of a
+  ``slanted_edges`` target, :mod:`bench_sim.metrics.edge_finder` every slanted edge of any image.
 """

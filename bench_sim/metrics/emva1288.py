@@ -28,10 +28,12 @@ serves any image type: a DTDI stage, or a fused HDR image whose gain is not a si
 The saturation point is located between the levels (parabolic refinement of the variance
 maximum) so that dynamic ranges can be compared to a few tenths of a dB even on a coarse grid.
 
-The steps from measured images to fitted quantities (pair statistics, ``K`` and responsivity
-fits, dark noise, saturation point, stack statistics) live in
-:mod:`bench_sim.metrics.photon_transfer`; this module builds the sensitivity, SNR and dynamic
-range on them and re-exports them, so ``bench_sim.metrics.emva1288`` is the one import.
+The steps from measured images to the series (pair statistics, dark noise, saturation point,
+stack statistics) live in :mod:`bench_sim.metrics.photon_transfer`; the fits of ``K``, the
+responsivity, the dark level and the saturation with standard errors are the one estimator
+:func:`bench_sim.metrics.emva_fit.fit_camera` (``ptc`` and ``calibrate`` alike); this module
+builds the sensitivity, SNR and dynamic range on them and re-exports them, so
+``bench_sim.metrics.emva1288`` is the one import.
 
 References
 ----------
@@ -49,20 +51,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bench_sim.errors import BenchSimError
+from bench_sim.metrics.emva_fit import CameraFit, fit_camera
 from bench_sim.metrics.photon_transfer import (
     LINEAR_FIT_FRACTION,
     SaturationMethod,
     SaturationPoint,
     as_1d,
     dark_temporal_noise_e,
-    fit_conversion_gain,
-    fit_responsivity,
     mean_var_from_pair,
     saturation_point,
     series_from_pairs,
     spatial_nonuniformity,
     stack_mean_var,
 )
+from bench_sim.metrics.ptc_table import make_table
 
 __all__ = [
     "SaturationMethod",
@@ -71,8 +73,6 @@ __all__ = [
     "PhotonTransferResult",
     "mean_var_from_pair",
     "series_from_pairs",
-    "fit_conversion_gain",
-    "fit_responsivity",
     "dark_temporal_noise_e",
     "saturation_point",
     "snr_curve",
@@ -240,20 +240,18 @@ def dynamic_range_from_series(
 
 @dataclass(frozen=True)
 class PhotonTransferResult:
-    """EMVA 1288 results of one image type (a camera, or one DTDI stage).
+    """EMVA 1288 results of one image type (a camera, or one DTDI stage): the one fit
+    (:class:`~bench_sim.metrics.emva_fit.CameraFit`: ``K``, QE, the dark noise, the saturation
+    capacity at the variance maximum, with standard errors) and the dynamic range of the series
+    (its saturation point refined between the levels, :func:`saturation_point`).
 
     Units: DN, electrons (e-) and photons of the series (for a DTDI stage: photons summed over
     the ``m`` frames of the stage).
     """
 
-    k_dn_per_e: float
-    responsivity_dn_per_photon: float
-    quantum_efficiency: float
+    fit: CameraFit
     dark_mean_dn: float
     dark_temporal_noise_dn: float
-    dark_temporal_noise_e: float
-    saturation_signal_dn: float
-    saturation_capacity_e: float
     photons_sat: float
     photons_min: float
     photons_min_model: float
@@ -263,17 +261,56 @@ class PhotonTransferResult:
     saturation: SaturationPoint
     snr: np.ndarray = field(repr=False)
 
+    @property
+    def k_dn_per_e(self) -> float:
+        """``K`` [DN/e-] of the fit."""
+        return self.fit.k_dn_per_e
+
+    @property
+    def responsivity_dn_per_photon(self) -> float:
+        """``R = eta K`` [DN/photon] of the fit."""
+        return self.fit.responsivity_dn_per_photon
+
+    @property
+    def quantum_efficiency(self) -> float:
+        """``eta`` of the fit."""
+        return self.fit.quantum_efficiency
+
+    @property
+    def dark_temporal_noise_e(self) -> float:
+        """``sigma_d`` [e-] of the fit."""
+        return self.fit.dark_noise_e
+
+    @property
+    def saturation_signal_dn(self) -> float:
+        """``mu_y.sat - mu_y.dark`` [DN] at the variance maximum (the fit's, EMVA 1288)."""
+        return self.fit.saturation_signal_dn
+
+    @property
+    def saturation_capacity_e(self) -> float:
+        """``mu_e.sat`` [e-] of the fit."""
+        return self.fit.saturation_capacity_e
+
     def summary(self) -> dict[str, float | int | str]:
-        """The scalar results as a JSON-friendly dict."""
+        """The scalar results as a JSON-friendly dict (the fit's values and standard errors)."""
+        f = self.fit
         return {
-            "K_dn_per_e": self.k_dn_per_e,
-            "responsivity_dn_per_photon": self.responsivity_dn_per_photon,
-            "quantum_efficiency": self.quantum_efficiency,
+            "K_dn_per_e": f.k_dn_per_e,
+            "K_se_dn_per_e": f.k_se,
+            "responsivity_dn_per_photon": f.responsivity_dn_per_photon,
+            "responsivity_se_dn_per_photon": f.responsivity_se,
+            "quantum_efficiency": f.quantum_efficiency,
+            "quantum_efficiency_se": f.quantum_efficiency_se,
             "dark_mean_dn": self.dark_mean_dn,
             "dark_temporal_noise_dn": self.dark_temporal_noise_dn,
-            "dark_temporal_noise_e": self.dark_temporal_noise_e,
-            "saturation_signal_dn": self.saturation_signal_dn,
-            "saturation_capacity_e": self.saturation_capacity_e,
+            "dark_temporal_noise_e": f.dark_noise_e,
+            "dark_temporal_noise_se_e": f.dark_noise_e_se,
+            "saturation_signal_dn": f.saturation_signal_dn,
+            "saturation_capacity_e": f.saturation_capacity_e,
+            "saturation_capacity_se_e": f.saturation_capacity_e_se,
+            "clips_on": f.clips_on,
+            "linearity_error_percent": f.linearity_error_percent,
+            "chi2_red_k": f.chi2_red_k,
             "photons_sat": self.photons_sat,
             "photons_min": self.photons_min,
             "photons_min_model": self.photons_min_model,
@@ -295,8 +332,13 @@ def analyse_photon_transfer(
     quantization_var_dn2: float = 1.0 / 12.0,
     saturation: SaturationMethod = "interpolated",
     fraction: float = LINEAR_FIT_FRACTION,
+    pixels: int | None = None,
+    bits: int | None = None,
+    exposure_s: float = 1.0,
 ) -> PhotonTransferResult:
-    """Full EMVA 1288 analysis of one series of bright levels plus its dark level.
+    """Full EMVA 1288 analysis of one series of bright levels plus its dark level: the one fit
+    (:func:`bench_sim.metrics.emva_fit.fit_camera`, what ``calibrate`` computes from the same
+    table) and the series' dynamic range.
 
     Parameters
     ----------
@@ -309,47 +351,45 @@ def analyse_photon_transfer(
     quantization_var_dn2
         ``sigma_q**2`` removed from the dark variance for ``sigma_d`` (``m/12`` for stage ``m``).
     saturation
-        Saturation method (:func:`saturation_point`).
+        Saturation method of the dynamic range (:func:`saturation_point`).
     fraction
         Upper end of the linear fit range as a fraction of the saturation signal.
+    pixels, bits, exposure_s
+        Pixels per image (absolute weights), the word's bits and the exposure time [s] of the
+        table (:func:`bench_sim.metrics.ptc_table.make_table`).
     """
     p = as_1d("photons", photons)
     mean = as_1d("mean_dn", mean_dn, p.size)
     var = as_1d("var_dn", var_dn, p.size)
-    signal = mean - float(dark_mean_dn)
-    sat = saturation_point(p, signal, var, "interpolated")
-    k = fit_conversion_gain(mean, var, dark_mean_dn, dark_var_dn, sat.signal, fraction)
-    r = fit_responsivity(p, mean, dark_mean_dn, sat.signal, fraction)
-    if k <= 0 or r <= 0:
-        raise BenchSimError(f"photon transfer: fitted K = {k:.4g}, R = {r:.4g} must be > 0")
-    eta = r / k
-    if saturation != "interpolated":
-        sat = saturation_point(p, signal, var, saturation, responsivity=r)
+    tab = make_table(
+        np.full(p.size + 1, float(exposure_s)), photons_per_pixel=np.concatenate([[0.0], p]),
+        mean_dn=np.concatenate([[float(dark_mean_dn)], mean]),
+        var_dn2=np.concatenate([[float(dark_var_dn)], var]),
+        pixels=pixels, bits=bits, source="photon-transfer series",
+    )
+    fit = fit_camera(tab, fraction=fraction, quantization_var_dn2=quantization_var_dn2)
+    k, eta = fit.k_dn_per_e, fit.quantum_efficiency
+    if not (k > 0 and eta > 0):
+        raise BenchSimError(f"photon transfer: fitted K = {k:.4g}, QE = {eta:.4g} must be > 0")
     # the dark level (photons 0, SNR 0) brackets SNR = 1 if the darkest bright level exceeds it
     dr = dynamic_range_from_series(
         np.concatenate([[0.0], p]),
         np.concatenate([[float(dark_mean_dn)], mean]),
         np.sqrt(np.maximum(np.concatenate([[float(dark_var_dn)], var]), 0.0)),
-        dark_signal=dark_mean_dn, saturation=saturation, responsivity=r,
+        dark_signal=dark_mean_dn, saturation=saturation, responsivity=fit.responsivity_dn_per_photon,
     )
     p_min_model = photons_min_model(eta, k, dark_var_dn)
     snr = dr.snr[1:]
-    finite = snr[: sat.index + 1]
     return PhotonTransferResult(
-        k_dn_per_e=k,
-        responsivity_dn_per_photon=r,
-        quantum_efficiency=eta,
+        fit=fit,
         dark_mean_dn=float(dark_mean_dn),
         dark_temporal_noise_dn=math.sqrt(max(float(dark_var_dn), 0.0)),
-        dark_temporal_noise_e=dark_temporal_noise_e(dark_var_dn, k, quantization_var_dn2),
-        saturation_signal_dn=sat.signal,
-        saturation_capacity_e=sat.signal / k,
-        photons_sat=sat.photons,
+        photons_sat=dr.photons_sat,
         photons_min=dr.photons_min,
         photons_min_model=p_min_model,
         dr_db=dr.dr_db,
-        dr_db_model=dynamic_range_db(sat.photons, p_min_model),
-        snr_max=float(np.max(finite)),
-        saturation=sat,
+        dr_db_model=dynamic_range_db(dr.photons_sat, p_min_model),
+        snr_max=float(np.max(snr[: dr.saturation.index])),
+        saturation=dr.saturation,
         snr=snr,
     )

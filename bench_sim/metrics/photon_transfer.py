@@ -1,6 +1,7 @@
-"""EMVA 1288 (Release 4) photon-transfer measurements and fits: the temporal mean and variance
-of a level, the ``K`` and responsivity fits over the linear range, the dark noise in electrons,
-the saturation point, and the stack statistics of the spatial non-uniformity.
+"""EMVA 1288 (Release 4) photon-transfer measurements: the temporal mean and variance of a
+level, the dark noise in electrons, the saturation point, and the stack statistics of the spatial
+non-uniformity. The ``K`` and responsivity fits are :func:`bench_sim.metrics.emva_fit.fit_camera`
+(the one estimator).
 
 The definitions and references are those of :mod:`bench_sim.metrics.emva1288` (which
 re-exports everything here); this module holds the steps from measured images to fitted
@@ -24,8 +25,6 @@ __all__ = [
     "as_1d",
     "mean_var_from_pair",
     "series_from_pairs",
-    "fit_conversion_gain",
-    "fit_responsivity",
     "dark_temporal_noise_e",
     "saturation_point",
     "stack_mean_var",
@@ -93,53 +92,6 @@ def _linear_mask(signal: np.ndarray, saturation_signal: float, fraction: float) 
             f"signal {saturation_signal:.6g} (add light levels)"
         )
     return mask
-
-
-def fit_conversion_gain(
-    mean_dn: np.ndarray,
-    var_dn: np.ndarray,
-    dark_mean_dn: float,
-    dark_var_dn: float,
-    saturation_signal_dn: float,
-    fraction: float = LINEAR_FIT_FRACTION,
-) -> float:
-    """Overall system gain ``K`` [DN/e-] from the photon-transfer curve (EMVA 1288 R4, eq. 7).
-
-    Least-squares slope through the origin of ``sigma_y**2 - sigma_y.dark**2`` versus
-    ``mu_y - mu_y.dark`` over the levels with ``0 < mu_y - mu_y.dark <= fraction * mu_y.sat``.
-
-    Parameters
-    ----------
-    mean_dn, var_dn
-        Temporal mean [DN] and variance [DN^2] of the bright levels.
-    dark_mean_dn, dark_var_dn
-        The same for the dark level.
-    saturation_signal_dn
-        Dark-subtracted saturation signal ``mu_y.sat`` [DN].
-    fraction
-        Upper end of the fit range (EMVA: 0.7).
-    """
-    mean = as_1d("mean_dn", mean_dn)
-    var = as_1d("var_dn", var_dn, mean.size)
-    x = mean - dark_mean_dn
-    y = var - dark_var_dn
-    mask = _linear_mask(x, saturation_signal_dn, fraction)
-    return _fit_through_origin(x[mask], y[mask])
-
-
-def fit_responsivity(
-    photons: np.ndarray,
-    mean_dn: np.ndarray,
-    dark_mean_dn: float,
-    saturation_signal_dn: float,
-    fraction: float = LINEAR_FIT_FRACTION,
-) -> float:
-    """Responsivity ``R = eta * K`` [DN/photon] (EMVA 1288 R4, eq. 5): slope through the origin
-    of ``mu_y - mu_y.dark`` versus ``mu_p`` over ``0 .. fraction * mu_y.sat``."""
-    p = as_1d("photons", photons)
-    x = as_1d("mean_dn", mean_dn, p.size) - dark_mean_dn
-    mask = _linear_mask(x, saturation_signal_dn, fraction)
-    return _fit_through_origin(p[mask], x[mask])
 
 
 def dark_temporal_noise_e(dark_var_dn: float, k_dn_per_e: float, quantization_var_dn2: float) -> float:

@@ -51,11 +51,14 @@ References
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from bench_sim.errors import BenchSimError
+from bench_sim.metrics.sfr_readings import SHARPENING_PEAK, mtf50, mtf50p, mtf_at, sfr_peak
+from bench_sim.metrics.sfr_roi import INVALID_MAX_FRACTION, check_roi, check_roi_bounds, roi_pixels
 
 __all__ = [
     "SFRResult",
@@ -68,6 +71,7 @@ __all__ = [
     "ANGLE_MAX_DEG",
     "MIN_ACROSS_PX",
     "MIN_ALONG_PX",
+    "INVALID_MAX_FRACTION",
 ]
 
 #: bins per pixel of the edge-spread function (ISO 12233: 4)
@@ -81,8 +85,8 @@ MIN_ACROSS_PX = 10
 MIN_ALONG_PX = 8
 #: largest correction of the derivative's transfer (as sfrmat3)
 _FIR_CORRECTION_MAX = 10.0
-#: a ROI with more than this fraction of clipped pixels is refused
-_CLIPPED_MAX_FRACTION = 1e-3
+#: rows with an invalid pixel within this distance [px] of the edge are left out of its fit
+_GUARD_PX = 6.0
 _AXIS = {"vertical": "columns", "horizontal": "rows"}
 
 
@@ -120,6 +124,18 @@ class SFRResult:
         Step of the edge [input units]: mean of the bright side minus mean of the dark side.
     roi
         ``(x0, y0, x1, y1)`` of the ROI in the input image (pixel indices, ends exclusive).
+    mtf50p_cyc_px
+        MTF50P [cycles/px]: where the SFR falls to half its peak below Nyquist
+        (:func:`bench_sim.metrics.sfr_readings.mtf50p`); equals MTF50 without sharpening.
+    sfr_peak
+        The largest SFR up to Nyquist (1 at 0 frequency without sharpening).
+    sharpened
+        The peak exceeds :data:`~bench_sim.metrics.sfr_readings.SHARPENING_PEAK`.
+    excluded_px
+        Pixels of the ROI left out as invalid (NaN, masked or clipped).
+
+    Frequencies run along the edge normal (the standard); along the pixel axis across the edge
+    they are ``f cos(edge_angle)`` (:func:`bench_sim.metrics.sfr_readings.axis_frequency`).
     """
 
     frequency_cyc_px: np.ndarray
@@ -135,67 +151,25 @@ class SFRResult:
     rows_used: int
     contrast: float
     roi: tuple[int, int, int, int]
-
-
-def mtf50(frequency: np.ndarray, sfr: np.ndarray, level: float = 0.5) -> float:
-    """Lowest frequency at which ``sfr`` falls to ``level`` (linear interpolation between the
-    samples around the first crossing), in the units of ``frequency``; NaN if it never does."""
-    f, s = np.asarray(frequency, dtype=np.float64), np.asarray(sfr, dtype=np.float64)
-    below = np.nonzero(s <= level)[0]
-    if below.size == 0:
-        return float("nan")
-    k = int(below[0])
-    if k == 0:
-        return float(f[0])
-    s0, s1 = s[k - 1], s[k]
-    return float(f[k - 1] + (f[k] - f[k - 1]) * (s0 - level) / (s0 - s1))
-
-
-def mtf_at(frequency: np.ndarray, sfr: np.ndarray, f: float) -> float:
-    """SFR at frequency ``f`` (linear interpolation); NaN outside the sampled range."""
-    fr = np.asarray(frequency, dtype=np.float64)
-    if not fr[0] <= f <= fr[-1]:
-        return float("nan")
-    return float(np.interp(f, fr, np.asarray(sfr, dtype=np.float64)))
-
-
-def _check_roi(shape: tuple[int, ...], roi: tuple[int, int, int, int] | None) -> tuple[int, int, int, int]:
-    if len(shape) != 2:
-        raise BenchSimError(f"image shape {shape}: the e-SFR needs a 2-D (single-channel) image")
-    h, w = shape
-    if roi is None:
-        return 0, 0, w, h
-    try:
-        x0, y0, x1, y1 = (int(v) for v in roi)
-    except (TypeError, ValueError):
-        raise BenchSimError(f"roi = {roi!r}: expected four integers x0, y0, x1, y1") from None
-    return check_roi_bounds((x0, y0, x1, y1), w, h, f"roi = {x0},{y0},{x1},{y1}")
-
-
-def check_roi_bounds(
-    box: tuple[int, int, int, int], width: int, height: int, given: str
-) -> tuple[int, int, int, int]:
-    """``box = (x0, y0, x1, y1)`` [pixels, ends exclusive] inside a ``width`` x ``height`` image;
-    else one error line that starts with ``given`` (how the caller names the ROI)."""
-    x0, y0, x1, y1 = box
-    if not (0 <= x0 < x1 <= width and 0 <= y0 < y1 <= height):
-        raise BenchSimError(
-            f"{given}: must satisfy 0 <= x0 < x1 <= {width} and 0 <= y0 < y1 <= {height} "
-            f"(the image is {width} x {height} pixels; ends exclusive)"
-        )
-    return box
+    mtf50p_cyc_px: float = float("nan")
+    sfr_peak: float = 1.0
+    sharpened: bool = False
+    excluded_px: int = 0
 
 
 def _orient(a: np.ndarray) -> tuple[np.ndarray, str]:
-    """The ROI turned so the edge is vertical and rises to the right, and its orientation."""
+    """The ROI turned so the edge is vertical and rises to the right, and its orientation
+    (invalid pixels are NaN and stay so)."""
     k = max(1, min(a.shape) // 8)
-    lr = abs(a[:, -k:].mean() - a[:, :k].mean())
-    tb = abs(a[-k:, :].mean() - a[:k, :].mean())
-    orientation = "vertical" if lr >= tb else "horizontal"
-    if orientation == "horizontal":
-        a = a.T
-    if a[:, -k:].mean() < a[:, :k].mean():
-        a = a[:, ::-1]
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN strip: a NaN mean
+        lr = abs(np.nanmean(a[:, -k:]) - np.nanmean(a[:, :k]))
+        tb = abs(np.nanmean(a[-k:, :]) - np.nanmean(a[:k, :]))
+        orientation = "vertical" if not tb > lr else "horizontal"
+        if orientation == "horizontal":
+            a = a.T
+        if np.nanmean(a[:, -k:]) < np.nanmean(a[:, :k]):
+            a = a[:, ::-1]
     return np.ascontiguousarray(a), orientation
 
 
@@ -208,21 +182,33 @@ def _hamming(n: int, centre: np.ndarray | float) -> np.ndarray:
     return 0.54 + 0.46 * np.cos(np.pi * (np.arange(n) - c) / half)
 
 
-def _centroids(a: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """Centroid [px] of each row's windowed central-difference derivative."""
+def _centroids(a: np.ndarray, centre: np.ndarray, guard_px: float) -> np.ndarray:
+    """Centroid [px] of each row's windowed central-difference derivative. Invalid (NaN)
+    pixels within ``guard_px`` of ``centre`` leave the row out (NaN); farther ones count as a
+    zero derivative."""
     d = np.zeros_like(a)
     d[:, 1:-1] = 0.5 * (a[:, 2:] - a[:, :-2])
+    bad = np.isnan(d)
+    near = bad & (np.abs(np.arange(a.shape[1])[None, :] - centre[:, None]) <= guard_px)
+    d[bad] = 0.0
     d *= _hamming(a.shape[1], centre)
     s = d.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return (d * np.arange(a.shape[1])).sum(axis=1) / s
+        c = (d * np.arange(a.shape[1])).sum(axis=1) / s
+    c[near.any(axis=1)] = np.nan
+    return c
 
 
 def _locate_edge(a: np.ndarray) -> tuple[float, float, float]:
-    """Fit ``x = x0 + s y`` to the edge of an oriented ROI; returns ``(x0, s, rms residual)``."""
+    """Fit ``x = x0 + s y`` to the edge of an oriented ROI; returns ``(x0, s, rms residual)``.
+    The first fit takes the rows without an invalid pixel (all rows when fewer than half are
+    whole); the refits leave out the rows with an invalid pixel near the line."""
     rows, cols = a.shape
     y = np.arange(rows, dtype=np.float64)
-    c = _centroids(a, np.full(rows, (cols - 1) / 2.0))
+    middle = np.full(rows, (cols - 1) / 2.0)
+    c = _centroids(a, middle, float(cols))
+    if np.isfinite(c).sum() < max(3, rows // 2):
+        c = _centroids(a, middle, -1.0)
     for _ in range(2):
         ok = np.isfinite(c)
         if ok.sum() < max(3, rows // 2):
@@ -230,7 +216,7 @@ def _locate_edge(a: np.ndarray) -> tuple[float, float, float]:
                 f"ROI {cols} x {rows} px (oriented): no edge found in most rows (no rise across them)"
             )
         s, x0 = np.polyfit(y[ok], c[ok], 1)
-        c = _centroids(a, np.clip(x0 + s * y, 0, cols - 1))
+        c = _centroids(a, np.clip(x0 + s * y, 0, cols - 1), _GUARD_PX)
     ok = np.isfinite(c)
     s, x0 = np.polyfit(y[ok], c[ok], 1)
     rms = float(np.sqrt(np.mean((c[ok] - (x0 + s * y[ok])) ** 2)))
@@ -240,8 +226,15 @@ def _locate_edge(a: np.ndarray) -> tuple[float, float, float]:
 def _check_edge(a: np.ndarray, where: str) -> float:
     """The edge's step (bright minus dark side) [input units]; refuses a ROI without one."""
     k = max(2, a.shape[1] // 4)
-    step = float(np.median(a[:, -k:].mean(axis=1) - a[:, :k].mean(axis=1)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a row with one side all invalid: NaN
+        steps = np.nanmean(a[:, -k:], axis=1) - np.nanmean(a[:, :k], axis=1)
+    steps = steps[np.isfinite(steps)]
+    step = float(np.median(steps)) if steps.size else float("nan")
     dev = np.diff(a, axis=1).ravel()
+    dev = dev[np.isfinite(dev)]
+    if dev.size == 0:
+        dev = np.zeros(1)
     noise = 1.4826 * float(np.median(np.abs(dev - np.median(dev)))) / np.sqrt(2.0)
     if not step > 0 or step < 4.0 * noise:
         raise BenchSimError(
@@ -249,20 +242,6 @@ def _check_edge(a: np.ndarray, where: str) -> float:
             f"{noise:.4g} (need a straight edge with a step of at least 4x the noise)"
         )
     return step
-
-
-def _check_clipping(a: np.ndarray, saturation: float | None, floor: float | None, where: str) -> None:
-    n = a.size
-    for level, hit, side in ((saturation, a >= (saturation or 0), "at or above saturation"),
-                             (floor, a <= (floor or 0), "at or below the floor")):
-        if level is None:
-            continue
-        count = int(hit.sum())
-        if count > _CLIPPED_MAX_FRACTION * n:
-            raise BenchSimError(
-                f"{where}: clipped edge: {count} of {n} pixels are {side} ({level:g}); the e-SFR "
-                "needs an unclipped edge (lower the exposure or choose another ROI)"
-            )
 
 
 def _esf(a: np.ndarray, x0: float, s: float) -> tuple[np.ndarray, int]:
@@ -275,8 +254,9 @@ def _esf(a: np.ndarray, x0: float, s: float) -> tuple[np.ndarray, int]:
     dist = np.arange(cols, dtype=np.float64)[None, :] - (x0 + s * y)
     nbins = OVERSAMPLING * cols
     idx = np.floor(dist * OVERSAMPLING).astype(np.int64) + nbins // 2
-    keep = (idx >= 0) & (idx < nbins)
-    idx, vals = idx[keep], a[y0 : y0 + n_rows][keep]
+    vals = a[y0 : y0 + n_rows]
+    keep = (idx >= 0) & (idx < nbins) & np.isfinite(vals)
+    idx, vals = idx[keep], vals[keep]
     count = np.bincount(idx, minlength=nbins).astype(np.float64)
     total = np.bincount(idx, weights=vals, minlength=nbins)
     filled = count > 0
@@ -345,6 +325,9 @@ def edge_sfr(
     pixel_pitch_m: float | None = None,
     saturation: float | None = None,
     floor: float | None = None,
+    valid: np.ndarray | None = None,
+    clipped: np.ndarray | None = None,
+    clip_level: float | None = None,
     where: str = "ROI",
 ) -> SFRResult:
     """ISO 12233:2017 e-SFR of the one slanted edge in ``image[y0:y1, x0:x1]`` (module docstring).
@@ -361,7 +344,17 @@ def edge_sfr(
         Pixel pitch [m] for the frequencies in cycles/mm (``None``: cycles/pixel only).
     saturation, floor
         Values at or above ``saturation`` / at or below ``floor`` count as clipped; a ROI with
-        more than 0.1 % of its pixels clipped is refused (``None``: not checked).
+        more than 0.1 % of its pixels clipped is refused (``None``: not checked); fewer clipped
+        pixels are left out like invalid ones.
+    valid
+        Boolean array of the image's shape, ``False`` where a pixel is invalid (a mask); NaN
+        and infinite pixels are invalid too. Invalid pixels are left out of the edge's fit
+        (a row with one within 6 px of the edge) and of the ESF; more than half of the ROI
+        invalid is refused.
+    clipped
+        Boolean array of the image's shape, ``True`` where a pixel clipped (a colour image's
+        channels, a camera's flags): counted and left out as ``saturation`` is; ``clip_level``
+        names the level in the message.
     where
         How the ROI is named in error messages.
 
@@ -376,12 +369,11 @@ def edge_sfr(
         outside ``ANGLE_MIN_DEG .. ANGLE_MAX_DEG``, or a crooked edge.
     """
     img = np.asarray(image)
-    x0r, y0r, x1r, y1r = _check_roi(img.shape, roi)
+    x0r, y0r, x1r, y1r = check_roi(img.shape, roi)
     if pixel_pitch_m is not None and not (np.isfinite(pixel_pitch_m) and pixel_pitch_m > 0):
         raise BenchSimError(f"pixel pitch = {pixel_pitch_m!r} m: must be a positive number")
-    raw = img[y0r:y1r, x0r:x1r].astype(np.float64)
-    if not np.isfinite(raw).all():
-        raise BenchSimError(f"{where}: contains NaN or inf values")
+    raw, excluded = roi_pixels(img, (x0r, y0r, x1r, y1r), saturation=saturation, floor=floor, valid=valid,
+                               clipped=clipped, clip_level=clip_level, where=where)
     a, orientation = _orient(raw)
     rows, cols = a.shape
     if cols < MIN_ACROSS_PX or rows < MIN_ALONG_PX:
@@ -389,7 +381,6 @@ def edge_sfr(
             f"{where}: too small ({raw.shape[1]} x {raw.shape[0]} px): a {orientation} edge needs at "
             f"least {MIN_ACROSS_PX} px across it and {MIN_ALONG_PX} along it"
         )
-    _check_clipping(raw, saturation, floor, where)
     contrast = _check_edge(a, where)
     x0, s, rms = _locate_edge(a)
     angle = _check_fit(x0, s, rms, a.shape, orientation, where)
@@ -397,18 +388,11 @@ def edge_sfr(
     lsf, freq, sfr = _spectrum(esf, float(np.cos(np.arctan(s))))
     pitch_mm = None if pixel_pitch_m is None else pixel_pitch_m * 1e3
     f50 = mtf50(freq, sfr)
+    peak = sfr_peak(freq, sfr)[0]
     return SFRResult(
-        frequency_cyc_px=freq,
-        frequency_cyc_mm=None if pitch_mm is None else freq / pitch_mm,
-        sfr=sfr,
-        mtf50_cyc_px=f50,
-        mtf50_cyc_mm=None if pitch_mm is None else f50 / pitch_mm,
-        mtf_nyquist=mtf_at(freq, sfr, 0.5),
-        edge_angle_deg=angle,
-        orientation=orientation,
-        esf=esf,
-        lsf=lsf,
-        rows_used=n_rows,
-        contrast=contrast,
-        roi=(x0r, y0r, x1r, y1r),
+        frequency_cyc_px=freq, frequency_cyc_mm=None if pitch_mm is None else freq / pitch_mm, sfr=sfr,
+        mtf50_cyc_px=f50, mtf50_cyc_mm=None if pitch_mm is None else f50 / pitch_mm,
+        mtf_nyquist=mtf_at(freq, sfr, 0.5), edge_angle_deg=angle, orientation=orientation, esf=esf, lsf=lsf,
+        rows_used=n_rows, contrast=contrast, roi=(x0r, y0r, x1r, y1r), mtf50p_cyc_px=mtf50p(freq, sfr),
+        sfr_peak=peak, sharpened=peak > SHARPENING_PEAK, excluded_px=excluded,
     )

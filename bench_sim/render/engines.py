@@ -42,6 +42,7 @@ from bench_sim.render.records import (
     render_array,
 )
 from bench_sim.render.texture import RunTexture, drum_texture, smear_filter
+from bench_sim.rig import spectra
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.lights import frame_weights
 from bench_sim.rig.scene import light_names, scene_dict
@@ -81,7 +82,7 @@ class ReferenceEngine:
         self.mi, self.cfg, self.geom = mi, cfg, geom
         self.spp = cfg.render.spp
         self.seed = int(seed)
-        self.texture = drum_texture(mi, grid, geom)
+        self.texture = drum_texture(mi, grid, geom, spectra.reflectance_dict(cfg))
         d = scene_dict(
             mi, cfg, geom, self.texture, width=cfg.sensor.columns, height=cfg.sensor.rows, spp=self.spp,
             spectral=cfg.render.spectral,

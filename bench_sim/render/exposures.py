@@ -3,7 +3,8 @@
 :func:`prepare` builds the Mitsuba scene and the chosen engine once; :func:`iter_photon_frames`
 then streams frames in chunks, each ``(chunk, rows M, columns N)`` photons, so a long pass never
 holds all frames at once. Radiometry (camera equation, cos^4, pixel area, integration time,
-photon energy) and the optional Airy PSF are applied per chunk.
+photon energy) is applied per chunk; the lens' blur (diffraction, or the user's lens) is in the
+texture the engines read (:mod:`bench_sim.render.lens_blur`).
 
 :func:`fast_records` makes the fast engine's light records of a config by themselves (a task
 that several passes share: :mod:`bench_sim.render.records`) and :func:`records_group` names the
@@ -22,7 +23,7 @@ import numpy as np
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.render.engines import FastEngine, ReferenceEngine, check_fast_engine_valid
-from bench_sim.render.radiometry import airy_pixel_kernel, apply_psf, radiance_to_photons_factor
+from bench_sim.render.radiometry import radiance_to_photons_factor
 from bench_sim.render.records import (
     LightRecords,
     cached_records,
@@ -32,6 +33,7 @@ from bench_sim.render.records import (
 )
 from bench_sim.render.texture import RunTexture, run_texture
 from bench_sim.rig.geometry import RigGeometry, rig_geometry
+from bench_sim.rig.spectra import check_spectra
 from bench_sim.runtime.backend import BackendChoice, init_mitsuba, select_backend
 
 __all__ = ["RenderSetup", "prepare", "iter_photon_frames", "render_photons", "fast_records", "records_group"]
@@ -47,7 +49,6 @@ class RenderSetup:
     engine: Any
     backend: BackendChoice
     photons_per_radiance: np.ndarray  # (M, N) photons per (W m^-2 sr^-1)
-    psf: np.ndarray | None
     first_frame: int
     frames: int
     seed: int
@@ -145,9 +146,6 @@ def prepare(
         s.wavelength_m,
         cos4=lens.cos4_falloff,
     ).astype(np.float32)
-    psf = None
-    if lens.diffraction_psf:
-        psf = airy_pixel_kernel(lens.f_number * (1 + geom.magnification), s.wavelength_m, s.pixel_pitch_m)
     info = {
         "engine": name,
         "variant": choice.variant,
@@ -158,6 +156,8 @@ def prepare(
         else "in-band photons at sensor.wavelength_m",
         "texture_shape": list(grid.shape),
         "texels_per_pixel": grid.q,
+        "lens_blur": "none (a perfect lens)" if grid.lens is None else grid.lens.otf.source,
+        **({"spectra": sources} if (sources := check_spectra(cfg)) else {}),
         "object_pixel_m": geom.object_pixel_m,
         "omega_rad_s": geom.omega_rad_s,
         "drum_rpm": geom.omega_rad_s * 60 / (2 * math.pi),
@@ -172,7 +172,7 @@ def prepare(
         "mitsuba_renders": eng.renders,
         "mitsuba_renders_process": mitsuba_render_count(),
     }
-    return RenderSetup(cfg, geom, grid, eng, choice, factor, psf, first_frame, frames, seed, info)
+    return RenderSetup(cfg, geom, grid, eng, choice, factor, first_frame, frames, seed, info)
 
 
 def iter_photon_frames(setup: RenderSetup, chunk: int = 64) -> Iterator[np.ndarray]:
@@ -182,8 +182,6 @@ def iter_photon_frames(setup: RenderSetup, chunk: int = 64) -> Iterator[np.ndarr
     while k < end:
         k1 = min(k + chunk, end)
         photons = setup.engine.radiance_frames(k, k1) * setup.photons_per_radiance
-        if setup.psf is not None:
-            photons = apply_psf(photons, setup.psf).astype(np.float32)
         np.maximum(photons, 0.0, out=photons)
         setup.info["mitsuba_renders"] = setup.engine.renders
         setup.info["mitsuba_renders_process"] = mitsuba_render_count()

@@ -3,14 +3,13 @@
 Mitsuba's film holds pixel-averaged scene radiance ``L`` [W m^-2 sr^-1] (in-band, mono). Neither
 its ``perspective`` nor its ``thinlens`` camera includes the lens' f-number, transmission or
 the cos^4 off-axis fall-off (a uniformly lit plane renders to the same radiance in the corner as
-in the centre), so they are applied here.
+in the centre), so they are applied here. The lens' blur is not: it acts on the image before the
+pixels integrate it (:mod:`bench_sim.render.lens_blur`).
 
 References
 ----------
 .. [Slater] P. N. Slater, *Remote Sensing: Optics and Optical Systems*, Addison-Wesley, 1980
    (camera equation: image irradiance of an extended Lambertian scene, cos^4 law).
-.. [Born] M. Born and E. Wolf, *Principles of Optics*, 7th ed., Cambridge University Press, 1999,
-   section 8.5.2 (Airy pattern and its encircled energy).
 """
 
 from __future__ import annotations
@@ -27,8 +26,6 @@ __all__ = [
     "photons_per_pixel",
     "cos_chief_ray",
     "radiance_to_photons_factor",
-    "airy_pixel_kernel",
-    "apply_psf",
 ]
 
 #: Planck constant [J s] and speed of light in vacuum [m/s]: exact in the SI since 2019 (the values
@@ -99,36 +96,3 @@ def radiance_to_photons_factor(
     cos_t = cos_chief_ray(rows, columns, pixel_pitch_m, image_distance_m) if cos4 else 1.0
     e = focal_plane_irradiance(1.0, f_number, magnification, transmission, cos_t)
     return np.broadcast_to(photons_per_pixel(e, pixel_pitch_m, t_int_s, wavelength_m), (rows, columns)).copy()
-
-
-def airy_pixel_kernel(
-    working_f_number: float, wavelength_m: float, pixel_pitch_m: float, oversample: int = 16
-) -> np.ndarray:
-    """Fraction of an Airy PSF's energy that falls on each neighbouring pixel when the PSF is
-    centred on a pixel, ``(2r+1, 2r+1)``, summing to 1.
-
-    The Airy intensity is ``[2 J1(x)/x]^2`` with ``x = pi * rho / (lambda N_w)``; it is
-    integrated over each pixel cell on an ``oversample``-times finer grid. The kernel extends to
-    the fifth dark ring (or at least one pixel).
-    """
-    from scipy import special  # imported here: only runs with the PSF need scipy's start-up
-
-    lam_n = wavelength_m * working_f_number
-    radius_m = 5.0 * 1.22 * lam_n
-    r = max(1, math.ceil(radius_m / pixel_pitch_m - 0.5))
-    n = (2 * r + 1) * oversample
-    coords = ((np.arange(n) + 0.5) / oversample - (r + 0.5)) * pixel_pitch_m
-    rho = np.hypot(coords[:, None], coords[None, :])
-    x = np.pi * rho / lam_n
-    with np.errstate(invalid="ignore", divide="ignore"):
-        i = np.where(x > 1e-9, (2.0 * special.j1(x) / x) ** 2, 1.0)
-    k = i.reshape(2 * r + 1, oversample, 2 * r + 1, oversample).sum(axis=(1, 3))
-    return k / k.sum()
-
-
-def apply_psf(frames: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """Convolve each frame (last two axes) with a small PSF kernel; edges replicate."""
-    from scipy import ndimage
-
-    k = kernel.reshape((1,) * (frames.ndim - 2) + kernel.shape)
-    return ndimage.convolve(frames, k, mode="nearest")

@@ -60,6 +60,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, config_to_toml_dict, with_overrides
 from bench_sim.render import record_store
+from bench_sim.rig import spectra
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.scene import fill_radiance_w_m2_sr, light_names, scene_dict
 
@@ -92,8 +93,8 @@ _SENSOR_NOISE_MODEL = frozenset({
     "read_noise", "prnu_enabled", "dsnu_enabled", "column_fpn", "quantization",
     "shot_noise_sampler",
 })
-#: Target settings the records depend on (the print's surface, not its pattern).
-_TARGET_SURFACE = frozenset({"finish", "gloss_roughness"})
+#: Target settings the records depend on (the print's surface and spectrum, not its pattern).
+_TARGET_SURFACE = frozenset({"finish", "gloss_roughness", "reflectance_spectrum"})
 
 _lock = threading.Lock()
 _renders = 0
@@ -155,6 +156,9 @@ def records_key(cfg: BenchConfig, variant: str) -> str:
     d["lights"] = lights
     d["variant"] = variant
     d["record_seed"] = RECORD_SEED
+    sources = spectra.check_spectra(cfg)  # a measured spectrum's table (a file's SHA-256 too)
+    if sources:
+        d["spectrum_sources"] = sources
     return json.dumps(d, sort_keys=True)
 
 
@@ -215,9 +219,12 @@ def _render_records(mi: Any, cfg: BenchConfig, geom: RigGeometry, key: str) -> L
     spp, spectral = cfg.render.spp, cfg.render.spectral
     count0 = mitsuba_render_count()
 
+    printed = spectra.reflectance_dict(cfg)  # the print's spectrum (spectral mode), else grey
+
     def scene(albedo: float, lights: list[str], aov: bool) -> dict[str, Any]:
+        refl = printed if albedo == 1.0 and printed is not None else {"type": "uniform", "value": albedo}
         return scene_dict(
-            mi, ref, geom, {"type": "uniform", "value": albedo}, width=N * ss, height=M * ss,
+            mi, ref, geom, refl, width=N * ss, height=M * ss,
             spp=spp, aov_position=aov, spectral=spectral, lights=lights,
         )
 

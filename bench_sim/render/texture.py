@@ -14,6 +14,12 @@ Plugin
     ``theta(p) = atan2(-p.y, p.z)``, ``t0`` is the frame's start time (an opaque Dr.Jit scalar, so
     changing it reuses the compiled kernel) and ``t`` the ray's time in ``[0, t_int]`` (smear).
 
+Lens
+    Through a lens (:func:`bench_sim.rig.lens_psf.lens_otf`: diffraction by default) the texture
+    holds the target as the camera sees it, blurred by the lens (:mod:`bench_sim.render.lens_blur`),
+    block by block; the grid then reaches the PSF's radius further beyond the field of view.
+    Both engines and the pass's truth (``reflectance``) read it so.
+
 Reuse
     A target that is not drawn (no ``image`` or generated layout: the panel follows from
     ``target.*`` alone) rasterises to the same texels on the same grid, so the rasterised blocks
@@ -35,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
+from bench_sim.render.lens_blur import TextureLens, texture_lens
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.target import TargetPanel, make_panel, rasterize_at
 from bench_sim.rig.target_sources import MAP_LAYOUTS
@@ -81,6 +88,8 @@ class RunTexture:
     v0_px: float
     hu_px: float
     hv_px: float
+    #: the lens' blur of the texture (:mod:`bench_sim.render.lens_blur`), ``None``: a perfect lens
+    lens: TextureLens | None = None
     _blocks: _Blocks = field(default_factory=_Blocks, repr=False)
 
     @property
@@ -103,11 +112,20 @@ class RunTexture:
         )
         return np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0]
 
+    def _made_block(self, b: int) -> np.ndarray:
+        """Block ``b``'s rows: rasterised and, through a lens, blurred with its margins."""
+        r0, r1 = b * BLOCK_ROWS, min((b + 1) * BLOCK_ROWS, self.n_rows)
+        if self.lens is None:
+            return self._rasterize(r0, r1)
+        m = self.lens.margin_rows
+        lo, hi = max(r0 - m, 0), min(r1 + m, self.n_rows)
+        return self.lens.apply(self._rasterize(lo, hi), m - (r0 - lo), m - (hi - r1))
+
     def _block(self, b: int) -> np.ndarray:
         blocks = self._blocks.blocks
         got = blocks.get(b)
         if got is None:
-            got = self._rasterize(b * BLOCK_ROWS, min((b + 1) * BLOCK_ROWS, self.n_rows))
+            got = self._made_block(b)
             blocks[b] = got
             while len(blocks) > CACHE_BLOCKS:
                 blocks.popitem(last=False)
@@ -140,14 +158,16 @@ class RunTexture:
     @functools.cached_property
     def values(self) -> np.ndarray:
         """The whole grid, (ny, nx) float32 (rasterised once, then kept)."""
-        return self._rasterize(0, self.n_rows)
+        if self.lens is None:
+            return self._rasterize(0, self.n_rows)
+        return np.concatenate([self._made_block(b) for b in range(-(-self.n_rows // BLOCK_ROWS))])
 
 
 _shared_lock = threading.Lock()
 _shared: OrderedDict[str, _Blocks] = OrderedDict()
 
 
-def _blocks_for(cfg: BenchConfig, circumference_px: float, grid: tuple[float | int, ...]) -> _Blocks:
+def _blocks_for(cfg: BenchConfig, circumference_px: float, grid: tuple[float | int | str, ...]) -> _Blocks:
     """The block cache of a grid: shared with the earlier passes over the same grid of the same
     target when the target is not drawn (see the module docstring), else a new one."""
     if cfg.target.layout in MAP_LAYOUTS:
@@ -170,24 +190,28 @@ def run_texture(
     q = cfg.target.texels_per_pixel
     h_y = geom.delta_m / q
     h_x = p / q
+    lens = texture_lens(cfg, geom, h_y, h_x)
+    # the lens reads the target beyond the field of view by its PSF's reach
+    margin_px = _MARGIN_PX + (0.0 if lens is None else lens.otf.radius_m / cfg.sensor.pixel_pitch_m)
     th = geom.row_theta_rad
     t0 = first_frame * geom.line_period_s
     t1 = (first_frame + frames - 1) * geom.line_period_s + geom.t_int_s
-    y_lo = float(geom.y_material(th.max(), t0)) - _MARGIN_PX * p
-    y_hi = float(geom.y_material(th.min(), t1)) + _MARGIN_PX * p
+    y_lo = float(geom.y_material(th.max(), t0)) - margin_px * p
+    y_hi = float(geom.y_material(th.min(), t1)) + margin_px * p
     # anchor the grid at y = 0 (scene line 0) so that runs starting at other frames share nodes
     a0 = int(np.floor(y_lo / h_y))
     ny = int(np.ceil(y_hi / h_y)) - a0 + 1
-    half_w = 0.5 * cfg.sensor.columns * p * 1.01 + _MARGIN_PX * p
+    half_w = 0.5 * cfg.sensor.columns * p * 1.01 + margin_px * p
     nx = int(np.ceil(2 * half_w / h_x)) + 1
     x_start = -0.5 * (nx - 1) * h_x
     circumference_px = 2 * np.pi * geom.radius_m / p
     panel = make_panel(cfg.target, circumference_px, rng)
     # panel coordinates: u = y / p (lines), v = x / p + columns / 2
     v0_px, hu_px, hv_px = x_start / p + cfg.target.panel_columns / 2.0, h_y / p, h_x / p
-    blocks = _blocks_for(cfg, float(circumference_px), (a0, ny, nx, v0_px, hu_px, hv_px))
+    grid_key: tuple[float | int | str, ...] = (a0, ny, nx, v0_px, hu_px, hv_px)
+    blocks = _blocks_for(cfg, float(circumference_px), grid_key + (() if lens is None else (lens.key,)))
     return RunTexture(
-        a0 * h_y, h_y, x_start, h_x, q, panel, ny, nx, v0_px=v0_px, hu_px=hu_px, hv_px=hv_px,
+        a0 * h_y, h_y, x_start, h_x, q, panel, ny, nx, v0_px=v0_px, hu_px=hu_px, hv_px=hv_px, lens=lens,
         _blocks=blocks,
     )
 
@@ -251,8 +275,11 @@ def _texture_class(mi: Any) -> Any:
             super().__init__(props)
             self.t0 = dr.opaque(mi.Float, 0.0)
 
-        def setup(self, grid: RunTexture, geom: RigGeometry, constant: float | None = None) -> None:
+        def setup(self, grid: RunTexture, geom: RigGeometry, constant: float | None = None,
+                  spectrum: dict[str, object] | None = None) -> None:
             self.constant = constant
+            # the print's reflectance spectrum (spectral variants), multiplying the pattern
+            self.spectrum = None if spectrum is None else mi.load_dict(spectrum)
             ny, nx = grid.shape
             tensor = mi.TensorXf(np.ascontiguousarray(grid.values[:, :, None], dtype=np.float32))
             self.tex = mi.Texture2f(
@@ -276,6 +303,8 @@ def _texture_class(mi: Any) -> Any:
             return self.tex.eval(uv)[0]
 
         def eval(self, si: Any, active: Any = True) -> Any:
+            if self.spectrum is not None:
+                return self.spectrum.eval(si, active) * self._albedo(si)
             return mi.UnpolarizedSpectrum(self._albedo(si))
 
         def eval_1(self, si: Any, active: Any = True) -> Any:
@@ -296,11 +325,14 @@ def _texture_class(mi: Any) -> Any:
     return name
 
 
-def drum_texture(mi: Any, grid: RunTexture, geom: RigGeometry) -> Any:
-    """A Mitsuba texture instance showing ``grid`` on the moving drum."""
+def drum_texture(
+    mi: Any, grid: RunTexture, geom: RigGeometry, spectrum: dict[str, object] | None = None
+) -> Any:
+    """A Mitsuba texture instance showing ``grid`` on the moving drum (times the print's
+    reflectance ``spectrum``, a Mitsuba spectrum, in a spectral variant)."""
     name = _texture_class(mi)
     tex = mi.load_dict({"type": name})
-    tex.setup(grid, geom)
+    tex.setup(grid, geom, spectrum=spectrum)
     return tex
 
 

@@ -57,7 +57,7 @@ import numpy as np
 
 from bench_sim.config import TargetConfig
 from bench_sim.errors import BenchSimError
-from bench_sim.io.images import image_file_problem, read_image_data
+from bench_sim.io.images import image_file_problem, read_image_data, srgb_to_linear
 
 __all__ = [
     "MAP_LAYOUTS",
@@ -85,12 +85,6 @@ _MAX_DISCS = 2_000_000
 
 class TargetImageError(BenchSimError):
     """A target image file that is missing, unreadable or has bad values (one line, names it)."""
-
-
-def srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    """sRGB transfer function inverted (IEC 61966-2-1): encoded 0..1 -> linear 0..1."""
-    v = np.asarray(v, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
 def _unit_values(arr: np.ndarray, path: str) -> tuple[np.ndarray, bool]:

@@ -45,7 +45,10 @@ import numpy as np
 
 from bench_sim.config import SensorConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.sensor.chain_draw import GenericPlan, expose_generic, needs_generic_path
+from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.sensor.exposure_kernel import electrons_to_dn, joint_draw_dn, joint_quantile
+from bench_sim.sensor.fixed_pattern import FixedPattern, draw_fixed_pattern
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2, pixel_mean_var_dn, pixel_saturation_dn
 from bench_sim.sensor.sampler import (
     COMBINED_READ_NOISE_MIN_E,
@@ -79,97 +82,6 @@ def _readonly(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
-@dataclass(frozen=True)
-class FixedPattern:
-    """The fixed-pattern properties of one physical sensor (read-only arrays).
-
-    Attributes
-    ----------
-    prnu_gain
-        (M, N) relative gain of each pixel for the light signal (PRNU), mean 1, dimensionless.
-    dark_current_e_s
-        (M, N) dark current of each pixel [e-/s] (mean ``dark_current_e_s``, rms ``dsnu_e_s``).
-    column_offset_dn
-        (N,) offset of each column amplifier [DN], mean 0.
-    """
-
-    prnu_gain: np.ndarray
-    dark_current_e_s: np.ndarray
-    column_offset_dn: np.ndarray
-
-    def __post_init__(self) -> None:
-        shape = np.shape(self.prnu_gain)
-        if len(shape) != 2:
-            raise ValueError(f"prnu_gain must be 2-D (rows, columns), got shape {shape}")
-        if np.shape(self.dark_current_e_s) != shape:
-            raise ValueError(
-                f"dark_current_e_s shape {np.shape(self.dark_current_e_s)} != prnu_gain shape {shape}"
-            )
-        if np.shape(self.column_offset_dn) != (shape[1],):
-            raise ValueError(
-                f"column_offset_dn shape {np.shape(self.column_offset_dn)} != ({shape[1]},)"
-            )
-        object.__setattr__(self, "prnu_gain", _readonly(np.asarray(self.prnu_gain, np.float64)))
-        object.__setattr__(
-            self, "dark_current_e_s", _readonly(np.asarray(self.dark_current_e_s, np.float64))
-        )
-        object.__setattr__(
-            self, "column_offset_dn", _readonly(np.asarray(self.column_offset_dn, np.float64))
-        )
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(rows, columns) of the sensor."""
-        return (int(self.prnu_gain.shape[0]), int(self.prnu_gain.shape[1]))
-
-    def window(self, rows: int | None = None, columns: int | None = None) -> FixedPattern:
-        """The fixed pattern of the top-left ``rows`` x ``columns`` pixels (a region of interest)."""
-        r = self.shape[0] if rows is None else rows
-        c = self.shape[1] if columns is None else columns
-        if not (1 <= r <= self.shape[0] and 1 <= c <= self.shape[1]):
-            raise ValueError(f"window {r} x {c} outside the sensor {self.shape[0]} x {self.shape[1]}")
-        return FixedPattern(
-            prnu_gain=self.prnu_gain[:r, :c],
-            dark_current_e_s=self.dark_current_e_s[:r, :c],
-            column_offset_dn=self.column_offset_dn[:c],
-        )
-
-
-def draw_fixed_pattern(sensor: SensorConfig, rng: np.random.Generator) -> FixedPattern:
-    """Draw the fixed patterns of one physical sensor of ``sensor.rows`` x ``sensor.columns``.
-
-    The three patterns are always drawn, in the order PRNU, DSNU, column offsets, each from
-    standard normal numbers, so switching one of them off does not change the others.
-
-    * PRNU gain ``g = max(1 + prnu * z, 0)`` (EMVA 1288 R4 section 2: the spatial standard
-      deviation of the photo-response is ``prnu * mu``); ``1`` when ``prnu_enabled`` is off.
-    * dark current ``I_d = max(dark_current_e_s + dsnu_e_s * z, 0)`` [e-/s];
-      ``dark_current_e_s`` everywhere when ``dsnu_enabled`` is off.
-    * column offsets ``column_offset_dn * z`` [DN]; ``0`` when ``column_fpn`` is off.
-
-    Parameters
-    ----------
-    sensor
-        Sensor geometry and pixel model.
-    rng
-        The run's random generator.
-    """
-    shape = (sensor.rows, sensor.columns)
-    z_prnu = rng.standard_normal(shape)
-    z_dsnu = rng.standard_normal(shape)
-    z_col = rng.standard_normal(sensor.columns)
-    if sensor.prnu_enabled:
-        gain = np.maximum(1.0 + sensor.prnu * z_prnu, 0.0)
-    else:
-        gain = np.ones(shape)
-    if sensor.dsnu_enabled:
-        dark = np.maximum(sensor.dark_current_e_s + sensor.dsnu_e_s * z_dsnu, 0.0)
-    else:
-        dark = np.full(shape, float(sensor.dark_current_e_s))
-    col = sensor.column_offset_dn * z_col if sensor.column_fpn else np.zeros(sensor.columns)
-    return FixedPattern(prnu_gain=gain, dark_current_e_s=dark, column_offset_dn=col)
-
-
 #: Elements per block of :func:`expose`'s loop (whole frames; a block's arrays stay in cache).
 _BLOCK_ELEMENTS = 1 << 16
 
@@ -198,6 +110,7 @@ class ExposurePlan:
     near_fw_e: float  # mean electrons from which the full well is within FULL_WELL_SIGMAS
     lam_per_photon_max: float  # largest qe_gain [e-/photon]
     dark_e_max: float  # largest dark_e [e-]
+    generic: GenericPlan | None = None  # a chain drawn step by step (bench_sim.sensor.chain_draw)
 
     @classmethod
     def of(cls, sensor: SensorConfig, fixed: FixedPattern, t_int_s: float) -> ExposurePlan:
@@ -228,6 +141,8 @@ class ExposurePlan:
             near_fw_e=((-k + np.sqrt(k * k + 4.0 * sensor.full_well_e)) / 2.0) ** 2,
             lam_per_photon_max=float(qe_gain.max()) if qe_gain.size else 0.0,
             dark_e_max=float(dark_e.max()) if dark_e.size else 0.0,
+            generic=GenericPlan.of(sensor, fixed, t_int_s)
+            if needs_generic_path(sensor_chain(sensor), fixed) else None,
         )
 
     @property
@@ -429,6 +344,9 @@ def expose(
     out = np.empty(frames.shape, dtype=np.uint16 if sensor.quantization else np.float64)
     sat = None if saturated is None else saturated.reshape(frames.shape)
     step = max(1, _BLOCK_ELEMENTS // (rows * cols))
+    if plan.generic is not None:
+        expose_generic(plan.generic, frames, rng, out, sat, step)
+        return out.reshape(p.shape)
     if plan.in_cache:
         _expose_in_cache(plan, frames, rng, out, sat, step)
         return out.reshape(p.shape)

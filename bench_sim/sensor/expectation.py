@@ -20,7 +20,11 @@ normal ``z`` (the distribution the ``hybrid`` sampler draws, :func:`bench_sim.se
 shot_electrons`), the read noise is integrated in closed form (moments of a two-sided clipped
 normal), and ``z`` by 12-node Gauss-Legendre quadrature on ``[-6.5, 6.5]`` split at the kinks (where the
 electrons reach the full well and where the mean reaches ``0`` and ``T``), so every piece is
-smooth. Rounding (``rint``) is unbiased there (the read's spread covers many DN).
+smooth; below :data:`~bench_sim.sensor.sampler.SHOT_NOISE_SWITCH_E` mean electrons (where the
+sampler draws the exact Poisson law and the quantile is no longer close to it) ``n`` is summed
+over its counts with the Poisson weights instead. Rounding (``rint``) is unbiased there (the
+read's spread covers many DN); it adds ``1/12`` DN^2 to the variance with the probability that the
+read is not pinned to a clip.
 
 Per stage (:func:`clipped_sum_mean`): the sum of ``m`` independent reads has the summed
 cumulants; its clip at ``0`` and ``W`` is taken through the one-term Edgeworth expansion with
@@ -41,15 +45,24 @@ Math. Soc. 29, 353-380. H. Cramer, Mathematical Methods of Statistics (1946), se
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from bench_sim.sensor.clipped_normal import clipped_normal_moments
+from bench_sim.sensor.clipped_normal import inside_probability as _inside
+from bench_sim.sensor.clipped_normal import normal_cdf as _cdf
+from bench_sim.sensor.clipped_normal import normal_pdf as _phi
 from bench_sim.sensor.cumulant_kernel import linear_cumulants
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2
+from bench_sim.sensor.sampler import SHOT_NOISE_SWITCH_E
+
+#: A monotone response of the charge, electrons -> electrons
+Response = Callable[[np.ndarray], np.ndarray]
 
 __all__ = [
+    "Response",
     "ReadModel",
     "read_cumulants",
     "clipped_sum_mean",
@@ -65,6 +78,9 @@ EDGEWORTH_ERROR_BOUND_SD = 0.01
 #: Clips further than this many sd from a normal read leave its moments unchanged in float64
 #: (the tail mass beyond, ``Phi(-9) ~ 1e-19``, is below the resolution of ``1 + x``).
 _FAR_CLIP_SDS = 9.0
+#: Read noise [DN] below which a read's clips are split points of the quadrature through a
+#: response (above it the clipped normal's moments are smooth in its mean)
+_KINK_SD_DN = 0.5
 #: Gauss-Legendre nodes per smooth piece of the ``z`` integral.
 _NODES = 12
 _Z_MAX = 6.5
@@ -110,45 +126,6 @@ class ReadModel:
         )
 
 
-def _phi(x: np.ndarray) -> np.ndarray:
-    return np.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
-
-
-def _cdf(x: np.ndarray) -> np.ndarray:
-    from scipy.special import ndtr
-
-    return np.asarray(ndtr(x))
-
-
-def clipped_normal_moments(
-    mu: np.ndarray, sd: np.ndarray | float, lo: np.ndarray | float, hi: np.ndarray | float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Raw moments ``E[X^k]``, ``k = 1, 2, 3``, of ``X = clip(Y, lo, hi)``, ``Y ~ N(mu, sd^2)``.
-
-    Partial moments of the normal inside ``(lo, hi)`` by the recursion
-    ``M_k = mu M_{k-1} + sd^2 (k - 1) M_{k-2} - sd (hi^{k-1} phi(beta) - lo^{k-1} phi(alpha))``
-    (``alpha, beta`` the standardised bounds), plus the point masses at the bounds. ``sd = 0``
-    gives ``clip(mu)``.
-    """
-    mu = np.asarray(mu, dtype=np.float64)
-    sd_a = np.broadcast_to(np.asarray(sd, dtype=np.float64), mu.shape)
-    lo_a = np.broadcast_to(np.asarray(lo, dtype=np.float64), mu.shape)
-    hi_a = np.broadcast_to(np.asarray(hi, dtype=np.float64), mu.shape)
-    safe = np.where(sd_a > 0, sd_a, 1.0)
-    a, b = (lo_a - mu) / safe, (hi_a - mu) / safe
-    pa, pb = _phi(a), _phi(b)
-    ca, cb = _cdf(a), _cdf(b)
-    m0 = cb - ca
-    m1 = mu * m0 - safe * (pb - pa)
-    m2 = mu * m1 + safe**2 * m0 - safe * (hi_a * pb - lo_a * pa)
-    m3 = mu * m2 + 2.0 * safe**2 * m1 - safe * (hi_a**2 * pb - lo_a**2 * pa)
-    out = []
-    for k, mk in ((1, m1), (2, m2), (3, m3)):
-        val = mk + lo_a**k * ca + hi_a**k * (1.0 - cb)
-        out.append(np.where(sd_a > 0, val, np.clip(mu, lo_a, hi_a) ** k))
-    return out[0], out[1], out[2]
-
-
 def _cf_quantile(z: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Cornish-Fisher quantile of Poisson(lam) (cumulants all ``lam``), third order."""
     s = np.sqrt(np.maximum(lam, 1e-300))
@@ -176,49 +153,115 @@ def _z_at(target: np.ndarray, lam: np.ndarray) -> np.ndarray:
 
 def _full_read_moments(
     mu: np.ndarray, sd: float, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Raw moments of full-well reads ``clip(N(mu, sd^2), lo, hi)``: the normal's own
-    (``mu``, ``mu^2 + sd^2``, ``mu^3 + 3 mu sd^2``) where both clips lie more than
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Raw moments of full-well reads ``clip(N(mu, sd^2), lo, hi)`` and :func:`_inside`: the
+    normal's own (``mu``, ``mu^2 + sd^2``, ``mu^3 + 3 mu sd^2``, 1) where both clips lie more than
     :data:`_FAR_CLIP_SDS` sd away (the clipped tails are below float64's resolution there), else
     :func:`clipped_normal_moments`."""
     far = (hi - mu > _FAR_CLIP_SDS * sd) & (mu - lo > _FAR_CLIP_SDS * sd)
     var = sd * sd
-    m1, m2, m3 = mu.copy(), mu * mu + var, mu * (mu * mu + 3.0 * var)
+    m1, m2, m3, p_in = mu.copy(), mu * mu + var, mu * (mu * mu + 3.0 * var), np.ones(mu.shape)
     if not np.all(far):
         near = ~far
         c1, c2, c3 = clipped_normal_moments(mu[near], sd, lo[near], hi[near])
         m1[near], m2[near], m3[near] = c1, c2, c3
-    return m1, m2, m3
+        p_in[near] = _inside(mu[near], sd, lo[near], hi[near])
+    return m1, m2, m3, p_in
+
+
+def _identity(e: np.ndarray) -> np.ndarray:
+    return e
+
+
+def _electrons_at(response: Response, target: np.ndarray, fw: float) -> np.ndarray:
+    """Electrons ``e`` in ``0 .. fw`` where the monotone ``response(e)`` reaches ``target``
+    (bisection; ``0`` or ``fw`` where it stays above or below it)."""
+    lo, hi = np.zeros(target.shape), np.full(target.shape, fw)
+    for _ in range(48):
+        mid = 0.5 * (lo + hi)
+        below = response(mid) < target
+        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+#: raw moments of reads and the probability that each is inside its clips
+Moments = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+#: counts of the exact Poisson sum: P(N > this) < 1e-20 for every mean below the switch
+_POISSON_COUNTS = np.arange(int(SHOT_NOISE_SWITCH_E + 12.0 * np.sqrt(SHOT_NOISE_SWITCH_E) + 13.0),
+                            dtype=np.float64)
+
+
+def _merge(mask: np.ndarray, part: Moments, rest: Moments) -> Moments:
+    """The moments of the reads of ``mask`` from ``part``, of the others from ``rest``."""
+    out = tuple(np.empty(mask.shape) for _ in range(4))
+    for j in range(4):
+        out[j][mask], out[j][~mask] = part[j], rest[j]
+    return out[0], out[1], out[2], out[3]
+
+
+def _full_reads(lam: np.ndarray, det_e: np.ndarray, off: np.ndarray, rm: ReadModel, lo: np.ndarray,
+                hi: np.ndarray, r: Response) -> Moments:
+    """Reads full at every node: the read is the clipped normal of the full well's response."""
+    top = r(np.full(lam.shape, rm.full_well_e))
+    return _full_read_moments(rm.gain_dn_per_e * top + off, rm.gain_dn_per_e * rm.read_noise_e, lo, hi)
+
+
+def _poisson_reads(lam: np.ndarray, det_e: np.ndarray, off: np.ndarray, rm: ReadModel, lo: np.ndarray,
+                   hi: np.ndarray, r: Response) -> Moments:
+    """Reads of Poisson means below :data:`~bench_sim.sensor.sampler.SHOT_NOISE_SWITCH_E`: the
+    exact sum over the counts ``n`` (Poisson weights; 0 electrons at a mean of 0), in blocks."""
+    from scipy.stats import poisson
+
+    k, fw, s = rm.gain_dn_per_e, rm.full_well_e, rm.gain_dn_per_e * rm.read_noise_e
+    out = tuple(np.empty(lam.shape) for _ in range(4))
+    step = max(1, _BLOCK_ELEMENTS // _POISSON_COUNTS.size)
+    for b in range(0, lam.size, step):
+        p = slice(b, b + step)
+        w = poisson.pmf(_POISSON_COUNTS[None, :], lam[p, None])
+        mu = k * r(np.minimum(_POISSON_COUNTS[None, :] + det_e[p, None], fw)) + off[p, None]
+        lo_p, hi_p = lo[p, None], hi[p, None]
+        mom = (*clipped_normal_moments(mu, s, lo_p, hi_p), _inside(mu, s, lo_p, hi_p))
+        total = w.sum(axis=1)
+        for j in range(4):
+            out[j][p] = (w * mom[j]).sum(axis=1) / total
+    return out[0], out[1], out[2], out[3]
 
 
 def _integrate_reads(
     lam: np.ndarray, det_e: np.ndarray, off: np.ndarray, rm: ReadModel, lo: np.ndarray, hi: np.ndarray,
-    noisy: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Raw moments of the clipped reads ``lam`` (1-D arrays), by quadrature over ``z``."""
+    noisy: bool, response: Response | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Raw moments of the clipped reads ``lam`` (1-D arrays) and the probability that a read is
+    inside its clips (:func:`_inside`), by quadrature over ``z``; with a monotone ``response`` of
+    the charge (after the full-well clip, before the read noise)."""
     k, fw, s = rm.gain_dn_per_e, rm.full_well_e, rm.gain_dn_per_e * rm.read_noise_e
+    r = _identity if response is None else response
     if not noisy or not np.any(lam > 0):
-        e = np.minimum(lam + det_e, fw)
-        return clipped_normal_moments(k * e + off, s, lo, hi)
+        mu = k * r(np.minimum(lam + det_e, fw)) + off
+        return (*clipped_normal_moments(mu, s, lo, hi), _inside(mu, s, lo, hi))
     # reads full at every node (the quantile at -_Z_MAX already reaches the full well; it rises
     # with z where lam is that large): the integrand is constant, the read a clipped normal
     full = lam + det_e >= fw  # (the quantile at -_Z_MAX lies below lam)
     lowest = _cf_quantile(np.full(int(full.sum()), -_Z_MAX), lam[full])
     full[full] = np.maximum(lowest, 0.0) + det_e[full] >= fw
-    if np.any(full):
-        m_full = _full_read_moments(k * fw + off[full], s, lo[full], hi[full])
-        rest = ~full
-        m_rest = _integrate_reads(lam[rest], det_e[rest], off[rest], rm, lo[rest], hi[rest], noisy) \
-            if np.any(rest) else (np.empty(0),) * 3
-        moments = tuple(np.empty(lam.shape) for _ in range(3))
-        for j in range(3):
-            moments[j][full], moments[j][rest] = m_full[j], m_rest[j]
-        return moments[0], moments[1], moments[2]
+    # small means: the exact Poisson law (what the hybrid sampler draws there; the quantile is not)
+    small = ~full & (lam < SHOT_NOISE_SWITCH_E)
+    for part, moments_of in ((full, _full_reads), (small, _poisson_reads)):
+        if np.any(part):
+            rest = ~part
+            m_part = moments_of(lam[part], det_e[part], off[part], rm, lo[part], hi[part], r)
+            m_rest = _integrate_reads(lam[rest], det_e[rest], off[rest], rm, lo[rest], hi[rest], noisy,
+                                      response) if np.any(rest) else (np.empty(0),) * 4
+            return _merge(part, m_part, m_rest)
     # kinks in z: full well, mean at lo and at hi
-    cuts = [_z_at(fw - det_e, lam), _z_at((lo - off) / k - det_e, lam), _z_at((hi - off) / k - det_e, lam)]
+    cuts = [_z_at(fw - det_e, lam)]
+    if response is None:  # the charge where the mean reaches each clip: a kink without read noise
+        cuts += [_z_at((lo - off) / k - det_e, lam), _z_at((hi - off) / k - det_e, lam)]
+    elif s < _KINK_SD_DN:  # through a response, found by bisection (only where the kink is sharp)
+        cuts += [_z_at(_electrons_at(response, (b - off) / k, fw) - det_e, lam) for b in (lo, hi)]
     fixed = [np.full(lam.shape, z) for z in (-_Z_MAX, -_Z_SPLIT, _Z_SPLIT, _Z_MAX)]
     edges = np.sort(np.stack([*fixed, *cuts]), axis=0)
-    acc = [np.zeros(lam.shape) for _ in range(3)]
+    acc = [np.zeros(lam.shape) for _ in range(4)]
     total = np.zeros(lam.shape)
     for p in range(edges.shape[0] - 1):
         a, b = edges[p], edges[p + 1]
@@ -226,11 +269,12 @@ def _integrate_reads(
         z = (0.5 * (a + b))[:, None] + half[:, None] * _GL_X[None, :]
         w = (half[:, None] * _GL_W[None, :]) * _phi(z)
         e = np.minimum(np.maximum(_cf_quantile(z, lam[:, None]), 0.0) + det_e[:, None], fw)
-        mom = clipped_normal_moments(k * e + off[:, None], s, lo[:, None], hi[:, None])
+        mu, lo_n, hi_n = k * r(e) + off[:, None], lo[:, None], hi[:, None]
+        mom = (*clipped_normal_moments(mu, s, lo_n, hi_n), _inside(mu, s, lo_n, hi_n))
         total += w.sum(axis=1)
-        for j in range(3):
+        for j in range(4):
             acc[j] += (w * mom[j]).sum(axis=1)
-    return acc[0] / total, acc[1] / total, acc[2] / total
+    return acc[0] / total, acc[1] / total, acc[2] / total, acc[3] / total
 
 
 def read_cumulants(
@@ -243,6 +287,7 @@ def read_cumulants(
     lo_dn: np.ndarray | float = 0.0,
     hi_dn: np.ndarray | float | None = None,
     out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    response: Response | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cumulants ``kappa_1`` [DN], ``kappa_2`` [DN^2], ``kappa_3`` [DN^3] of clipped reads.
 
@@ -263,11 +308,17 @@ def read_cumulants(
         clip in here (exact).
     out
         Three float64 arrays of ``lam_e``'s shape to write the cumulants into (default: new ones).
+    response
+        A monotone, non-decreasing response of the charge, ``e -> r(e)`` [e-], after the
+        full-well clip and before the read noise (a non-linearity,
+        :class:`bench_sim.sensor.effects.base.Response`): every read is then integrated through
+        it by the quadrature (none is linear).
 
     Returns
     -------
     (kappa_1, kappa_2, kappa_3)
-        Arrays of ``lam_e``'s shape; ``kappa_2`` includes the rounding's ``1/12``.
+        Arrays of ``lam_e``'s shape; ``kappa_2`` includes the rounding's ``1/12`` (where the read
+        is not pinned to a clip: a read at a clip does not vary).
     """
     lam = np.asarray(lam_e, dtype=np.float64, order="C")
     det0, off0 = np.asarray(det_e, dtype=np.float64), np.asarray(offset_dn, dtype=np.float64)
@@ -284,15 +335,62 @@ def read_cumulants(
         read_noise_e=rm.read_noise_e, noisy=noisy, clip_sigmas=CLIP_SIGMAS,
         quantization_var_dn2=QUANTIZATION_VAR_DN2 if rm.quantization else None,
     )
+    if response is not None:  # a response: no read is linear; those far from every clip are smooth
+        near[...] = True
+        _smooth_response_reads(lam, det0, off0, lo0, top0, rm, noisy, response, (k1, k2, k3), near)
     if np.any(near):
         det, off = (np.broadcast_to(a, lam.shape)[near] for a in (det0, off0))
         lo, hi = (np.broadcast_to(a, lam.shape)[near] for a in (lo0, hi0))
-        m1, m2, m3 = _integrate_reads(lam[near], det, off, rm, lo, hi, noisy)
+        m1, m2, m3, p_in = _integrate_reads(lam[near], det, off, rm, lo, hi, noisy, response)
         c2 = np.maximum(m2 - m1 * m1, 0.0)
         k1[near] = m1
-        k2[near] = c2 + np.where(c2 > 0.0, QUANTIZATION_VAR_DN2 if rm.quantization else 0.0, 0.0)
+        # the rounding's 1/12 where the read is not pinned to a clip (a pinned read does not vary)
+        k2[near] = c2 + np.where(c2 > 0.0, p_in * (QUANTIZATION_VAR_DN2 if rm.quantization else 0.0), 0.0)
         k3[near] = m3 - 3.0 * m1 * m2 + 2.0 * m1**3
     return k1, k2, k3
+
+
+#: Gauss-Hermite nodes and weights (probabilists', weight exp(-z^2 / 2)) of the smooth reads
+_GH_X, _GH_W = np.polynomial.hermite_e.hermegauss(24)
+_GH_W = _GH_W / _GH_W.sum()
+#: the Cornish-Fisher quantile's terms at the nodes: (z^2 - 1) / 6 and (z^3 - 3z) / 24 - (2z^3 - 5z) / 36
+_GH_A = (_GH_X**2 - 1.0) / 6.0
+_GH_B = (_GH_X**3 - 3.0 * _GH_X) / 24.0 - (2.0 * _GH_X**3 - 5.0 * _GH_X) / 36.0
+
+
+def _smooth_response_reads(
+    lam: np.ndarray, det0: np.ndarray, off0: np.ndarray, lo0: np.ndarray, top0: np.ndarray, rm: ReadModel,
+    noisy: bool, response: Response, out: tuple[np.ndarray, np.ndarray, np.ndarray], near: np.ndarray,
+) -> None:
+    """The reads through a ``response`` that lie :data:`CLIP_SIGMAS` standard deviations from
+    every clip and from zero electrons: their moments by Gauss-Hermite quadrature of the
+    Cornish-Fisher quantile (smooth there: no kink in range; the read noise's normal moments
+    in closed form); written into ``out`` and cleared in ``near``."""
+    k, s = rm.gain_dn_per_e, rm.gain_dn_per_e * rm.read_noise_e
+    det, off, lo, top = (np.broadcast_to(a, lam.shape) for a in (det0, off0, lo0, top0))
+    spread = CLIP_SIGMAS * np.sqrt(np.maximum(lam, 0.0)) if noisy else np.zeros(lam.shape)
+    e_lo, e_hi = lam - spread + det, lam + spread + det
+    ok = (lam - spread > 0) & (e_hi < rm.full_well_e)
+    ok[ok] &= k * response(e_lo[ok]) + off[ok] - CLIP_SIGMAS * s - 1.0 > lo[ok]
+    ok[ok] &= k * response(e_hi[ok]) + off[ok] + CLIP_SIGMAS * s + 1.0 < top[ok]
+    if not np.any(ok):
+        return
+    lam_s, det_s, off_s = lam[ok][:, None], det[ok][:, None], off[ok][:, None]
+    if noisy:  # the Cornish-Fisher quantile (:func:`_cf_quantile`): lam + sqrt(lam) z + A + B / sqrt(lam)
+        root = np.sqrt(lam_s)
+        e = (lam_s + _GH_A) + root * _GH_X + _GH_B / root
+    else:
+        e = lam_s
+    # the far nodes (beyond CLIP_SIGMAS, weights < 1e-9) may leave 0 .. FW: the response gets charge
+    y = k * response(np.clip(e + det_s, 0.0, rm.full_well_e)) + off_s
+    w = _GH_W if noisy else np.ones(1)
+    mean = (y * w).sum(axis=1)
+    d = y - mean[:, None]  # central moments: the normal read noise adds s^2 and no skew
+    k1, k2, k3 = out
+    k1[ok] = mean
+    k2[ok] = (d * d * w).sum(axis=1) + s * s + (QUANTIZATION_VAR_DN2 if rm.quantization else 0.0)
+    k3[ok] = (d**3 * w).sum(axis=1)
+    near[ok] = False
 
 
 def _shortfall(c: np.ndarray, gamma: np.ndarray) -> np.ndarray:
@@ -346,4 +444,44 @@ def _clipped_sum_block(
     for short, c, sel, sign in ((upper, c_hi, near_hi[near], 1.0), (lower, c_lo, near_lo[near], -1.0)):
         short[sel] = sdn[sel] * _shortfall(c[near][sel], sign * gamma[sel])
     out[near] = np.clip(k1n + lower - upper, lo, hi)
+    return out
+
+
+def _shortfall2(c: np.ndarray, gamma: np.ndarray) -> np.ndarray:
+    """``E[((Z - c)+)^2]`` of a standardised variable with skewness ``gamma`` (one-term Edgeworth:
+    the correction term integrates ``(z - c)^2 He_3(z) phi(z)`` to ``2 phi(c)``)."""
+    return (1.0 + c * c) * (1.0 - _cdf(c)) - c * _phi(c) + gamma * _phi(c) / 3.0
+
+
+def clipped_sum_var(
+    k1: np.ndarray, k2: np.ndarray, k3: np.ndarray, lo: float, hi: float, *, lattice: bool = True
+) -> np.ndarray:
+    """``Var[clip(S, lo, hi)]`` [DN^2] of a sum ``S`` with cumulants ``k1, k2, k3``.
+
+    ``E[clip(S)^2] - E[clip(S)]^2``, with ``clip(S)^2 = S^2 - ((S - hi)+)^2 - 2 hi (S - hi)+ -
+    ((lo - S)+)^2 + 2 lo (lo - S)+`` and each shortfall from the one-term Edgeworth expansion
+    (:func:`_shortfall`, :func:`_shortfall2`) of the continuous sum (variance ``k2 - 1/12``
+    with ``lattice``); the lattice's ``1/12`` is added back with the probability that the sum
+    lies inside the range. Where both clips lie more than 12 standard deviations away it is
+    ``k2`` itself (the sum's own variance). The EMVA 1288 temporal variance of a stage word.
+    """
+    k1, k2, k3 = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (k1, k2, k3)))
+    q = QUANTIZATION_VAR_DN2 if lattice else 0.0
+    var = np.maximum(k2 - q, 0.0)
+    sd = np.sqrt(var)
+    ok = sd > 1e-9
+    safe = np.where(ok, sd, 1.0)
+    c_hi, c_lo = (hi - k1) / safe, (k1 - lo) / safe
+    near = ok & ((c_hi <= _FAR_SDS) | (c_lo <= _FAR_SDS))
+    out = np.where(ok, k2, 0.0)
+    if not np.any(near):
+        return out
+    m, s, a, b = k1[near], safe[near], c_hi[near], c_lo[near]
+    gamma = np.clip(k3[near] / s**3, -1.0, 1.0)
+    up1, up2 = s * _shortfall(a, gamma), s * s * _shortfall2(a, gamma)
+    dn1, dn2 = s * _shortfall(b, -gamma), s * s * _shortfall2(b, -gamma)
+    mean = m + dn1 - up1
+    second = var[near] + m * m - up2 - 2.0 * hi * up1 - dn2 + 2.0 * lo * dn1
+    inside = _cdf(a) - _cdf(-b)
+    out[near] = np.maximum(second - mean * mean, 0.0) + q * np.clip(inside, 0.0, 1.0)
     return out

@@ -12,15 +12,18 @@ the word's clip folded into the read's) and ``clipped``; ``reflectance`` per ban
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.render.exposures import RenderSetup
+from bench_sim.sensor.chain_truth import law_read_cumulants, law_read_model, linear_maps, stage_constant_dn
 from bench_sim.sensor.cumulant_kernel import light_quantities
 from bench_sim.sensor.dtdi import full_scale_dn, word_shift_dn
+from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.sensor.emva import FixedPattern
-from bench_sim.sensor.expectation import ReadModel, clipped_sum_mean, read_cumulants
+from bench_sim.sensor.expectation import clipped_sum_mean, clipped_sum_var, read_cumulants
 from bench_sim.sensor.stage_truth import (
     StageSums,
     reflectance_rows,
@@ -76,7 +79,9 @@ class PassTruth:
         self.lines, n_cols = cfg.lines, cfg.sensor.columns
         beta, ped = cfg.dtdi.beta_bits, float(pedestal_dn)
         self.sums = StageSums(n_cols, st, len(TRUTH_QUANTITIES))
-        self.read_model = ReadModel.of(cfg.sensor)
+        #: each read's law under the chain's effects (bench_sim.sensor.chain_truth)
+        self.law = sensor_chain(cfg.sensor).law(dict(fp.effects))
+        self.read_model = law_read_model(cfg.sensor, self.law)
         black = cfg.sensor.black_offset_dn if cfg.dtdi.subtract_black else 0.0
         #: the word's shift per stage, and the word's clip folded into one read (m = 1)
         self.shift = {
@@ -88,19 +93,26 @@ class PassTruth:
         self.done = dict.fromkeys(st, 0)
         self.refl_done = 0
         t_int = setup.geom.t_int_s
-        self.offsets = {
-            m: stage_dark_offset_dn(
-                cfg.sensor, fp, t_int, m, subtract_black=cfg.dtdi.subtract_black, pedestal_dn=ped
-            )
-            for m in st
-        }
-        self.offset_stack = np.stack([self.offsets[m] for m in st])
         # the footprints of the pass's rows (a truth of some of its stages: the same footprints)
         self.footprints = row_footprints(cfg, setup.geom, setup.grid, footprint_rows or st[-1])
         self.gain = fp.prnu_gain
         self.qe_gain = cfg.sensor.quantum_efficiency * fp.prnu_gain
         self.dark_e = fp.dark_current_e_s * t_int
         self.offset_dn = cfg.sensor.black_offset_dn + fp.column_offset_dn
+        self.default = self.law.linear and self.law.extra_read_var_dn2 == 0 and fp.offset_dn is None
+        if self.default:  # the default chain: its own closed forms (bit for bit as before)
+            self.offsets = {
+                m: stage_dark_offset_dn(
+                    cfg.sensor, fp, t_int, m, subtract_black=cfg.dtdi.subtract_black, pedestal_dn=ped
+                )
+                for m in st
+            }
+        else:
+            if fp.offset_dn is not None:
+                self.offset_dn = self.offset_dn + fp.offset_dn
+            self.gain, constant = linear_maps(cfg.sensor, self.law, fp.prnu_gain, self.dark_e, self.offset_dn)
+            self.offsets = {m: stage_constant_dn(constant, m, self.shift[m]) for m in st}
+        self.offset_stack = np.stack([self.offsets[m] for m in st])
         self._buf: np.ndarray | None = None
 
     def push(self, got: Exposed) -> list[TruthBlock]:
@@ -120,7 +132,7 @@ class PassTruth:
         return out
 
     def _stage_lines(
-        self, parts: list[tuple[int, int, np.ndarray]], k1_stage1: np.ndarray | None
+        self, parts: list[tuple[int, int, np.ndarray]], k1_stage1: tuple[np.ndarray, ...] | None
     ) -> list[TruthBlock]:
         """The truth of the lines of every stage a chunk completed, ``(m, j0, (Q, n, N) sums)`` per
         stage, in one vectorised step over all of them (the same operations per pixel as stage by
@@ -137,10 +149,13 @@ class PassTruth:
             "photons": q["photons"],
             "linear_dn": stage_mean_dn(q["gain_photons"], self.cfg.sensor, offsets),
             "mean_dn": clipped_sum_mean(q["k1"] + shift, q["k2"], q["k3"], 0.0, self.word, lattice=lattice),
+            "noise_std_dn": np.sqrt(clipped_sum_var(q["k1"] + shift, q["k2"], q["k3"], 0.0, self.word,
+                                                    lattice=lattice)),
             "clipped": q["saturated"] > 0,
         }
         if parts[0][0] == 1 and k1_stage1 is not None:  # stage 1's lines are this chunk's frames
-            values["mean_dn"][: counts[0]] = (0.0 + k1_stage1[: counts[0]]) + self.shift[1]
+            values["mean_dn"][: counts[0]] = (0.0 + k1_stage1[0][: counts[0]]) + self.shift[1]
+            values["noise_std_dn"][: counts[0]] = np.sqrt(k1_stage1[1][: counts[0]])
         out: list[TruthBlock] = []
         start = 0
         for (m, j0, _), n in zip(parts, counts, strict=True):
@@ -148,7 +163,18 @@ class PassTruth:
             start += n
         return out
 
-    def _read_quantities(self, got: Exposed) -> tuple[list[np.ndarray], np.ndarray | None]:
+    def _cumulants(
+        self, lam: np.ndarray, det: np.ndarray, rows: slice | int, noisy: bool, **kw: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each read's cumulants: :func:`~bench_sim.sensor.expectation.read_cumulants` (the
+        default chain), else under the chain's law
+        (:func:`bench_sim.sensor.chain_truth.law_read_cumulants`)."""
+        off = self.offset_dn if np.ndim(self.offset_dn) < 2 else self.offset_dn[rows]
+        if self.default:
+            return read_cumulants(lam, det, off, self.read_model, noisy=noisy, **kw)
+        return law_read_cumulants(lam, det, off, self.read_model, self.law, rows, noisy=noisy, **kw)
+
+    def _read_quantities(self, got: Exposed) -> tuple[list[np.ndarray], tuple[np.ndarray, ...] | None]:
         """Per read of a chunk (C frames, R rows, N columns): the (C, R, N) quantities
         :data:`TRUTH_QUANTITIES` that the stages sum, the cumulants of every clipped read
         (:func:`bench_sim.sensor.expectation.read_cumulants`); and row 0's mean read with the
@@ -178,11 +204,8 @@ class PassTruth:
         k1_stage1 = None
         if 1 in self.st:  # stage 1 is one read: the word's clip folds into the read's (exact)
             bdet = det if np.ndim(det) == 0 else det[:, 0]
-            k1_stage1 = read_cumulants(
-                lam[:, 0], bdet, self.offset_dn, self.read_model, noisy=noisy, lo_dn=self.fold[0],
-                hi_dn=self.fold[1],
-            )[0]
-        read_cumulants(lam, det, self.offset_dn, self.read_model, noisy=noisy, out=(k1, k2, k3))
+            k1_stage1 = self._cumulants(lam[:, 0], bdet, 0, noisy, lo_dn=self.fold[0], hi_dn=self.fold[1])
+        self._cumulants(lam, det, slice(0, rows), noisy, out=(k1, k2, k3))
         saturated = got.saturated[:, :rows] if got.saturated is not None else np.zeros(ph.shape, dtype=bool)
         return [ph, gain_photons, k1, k2, k3, saturated], k1_stage1
 

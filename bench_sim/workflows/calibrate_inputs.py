@@ -1,14 +1,21 @@
 """The inputs of ``bench-sim calibrate``: a photon-transfer table (CSV), EMVA 1288 results
-(TOML, or the results XML of the ``emva1288`` package) and an EMVA 1288 descriptor with its
-images. Each reader checks its file and raises one line (:class:`~bench_sim.errors.BenchSimError`)
-naming the file, the key or row, the value and what is allowed.
+(TOML, or the results XML of the ``emva1288`` package), the raw images of a measurement (a frames
+``.npz`` or a folder of images with ``frames.csv``: :mod:`bench_sim.workflows.calibrate_images`)
+and an EMVA 1288 descriptor with its images. Each reader checks its file and raises one line
+(:class:`~bench_sim.errors.BenchSimError`) naming the file, the key or row, the value and what is
+allowed.
 
 Formats (docs/calibrate.md has examples)
 ----------------------------------------
-* **CSV** (``.csv``): one row per level; required columns ``exposure_s``, ``photons_per_pixel``
-  (0 for a dark row), ``mean_dn``, ``var_dn2``; optional ``dark_mean_dn``, ``dark_var_dn2``,
-  ``wavelength_nm``, ``pixels`` (pixels per image, for absolute weights) and ``bits`` (ADC
-  bits); other columns are ignored, ``#`` lines are comments.
+* **CSV** (``.csv``): one row per level; required columns ``exposure_s``, a mean (``mean_dn``,
+  or ``signal_dn`` dark-subtracted) and a variance (``var_dn2``, or ``signal_var_dn2``
+  dark-subtracted, with ``dark_var_dn2``); the irradiation ``photons_per_pixel`` (0 for a dark
+  row), or ``relative_irradiance``, or neither (the exposure time is the abscissa; QE unknown);
+  dark rows by ``kind = dark`` or 0 photons, or ``dark_mean_dn``/``dark_var_dn2`` per row;
+  optional ``wavelength_nm``, ``pixels`` (pixels per image, for absolute weights), ``images``
+  (per mean and variance, default 2), ``bits`` (ADC bits) and ``quantization_var_dn2`` (one
+  value each); other columns are ignored, ``#`` lines are comments
+  (:mod:`bench_sim.metrics.ptc_table`).
 * **TOML** (``.toml``): the quantities of an EMVA 1288 data sheet, :data:`RESULT_KEYS`.
 * **XML** (``.xml``): ``Results1288.xml()`` of the ``emva1288`` package (sections
   ``sensitivity``, ``dark_current``, ``spatial``; elements with a ``value``).
@@ -31,8 +38,11 @@ from bench_sim.config import read_toml
 from bench_sim.errors import BenchSimError
 from bench_sim.io import ImageReadError, read_image
 from bench_sim.io.input_files import input_file_problem
-from bench_sim.measure.calibration import PtcTable, make_table
 from bench_sim.metrics.emva1288 import mean_var_from_pair, spatial_nonuniformity
+from bench_sim.metrics.frame_series import FrameSeries
+from bench_sim.metrics.ptc_table import PtcTable, make_table
+from bench_sim.sensor.model import QUANTIZATION_VAR_DN2
+from bench_sim.workflows.calibrate_images import MANIFEST, read_frames_file, read_frames_folder
 
 __all__ = [
     "CalibrationInput",
@@ -45,8 +55,30 @@ __all__ = [
     "read_descriptor",
 ]
 
-REQUIRED_COLUMNS = ("exposure_s", "photons_per_pixel", "mean_dn", "var_dn2")
-_OPTIONAL_COLUMNS = ("dark_mean_dn", "dark_var_dn2", "wavelength_nm", "pixels", "bits")
+REQUIRED_COLUMNS = ("exposure_s",)
+#: the per-row columns of a table (make_table's keywords)
+_SERIES_COLUMNS = (
+    "photons_per_pixel",
+    "relative_irradiance",
+    "mean_dn",
+    "var_dn2",
+    "signal_dn",
+    "signal_var_dn2",
+    "dark_mean_dn",
+    "dark_var_dn2",
+)
+_ALL_COLUMNS = (
+    "exposure_s",
+    *_SERIES_COLUMNS,
+    "kind",
+    "wavelength_nm",
+    "pixels",
+    "bits",
+    "images",
+    "quantization_var_dn2",
+)
+#: a row's ``kind`` -> whether it is a dark row
+_ROW_KINDS = {"dark": True, "flat": False, "light": False, "bright": False}
 #: key -> (required, lower bound, upper bound, meaning)
 RESULT_KEYS: dict[str, tuple[bool, float, float, str]] = {
     "K_dn_per_e": (True, 0.0, math.inf, "overall system gain [DN/e-]"),
@@ -67,9 +99,12 @@ _TEXT_KEYS = ("name", "source", "notes", "sensor")
 class CalibrationInput:
     """What an input file holds: a table to fit, or EMVA results to take as they are.
 
-    ``kind``: ``"table"``, ``"descriptor"``, ``"results_toml"`` or ``"results_xml"``;
-    ``spatial``: DSNU [DN, divide by K] and PRNU from a descriptor's stacks (``dsnu_dn``,
-    ``prnu``, and the dark stack's ``exposure_s``); ``text``: text keys of a results TOML (name, source).
+    ``kind``: ``"table"``, ``"descriptor"``, ``"images"``, ``"results_toml"`` or
+    ``"results_xml"``; ``spatial``: DSNU [DN, divide by K] and PRNU from a descriptor's stacks
+    (``dsnu_dn``, ``prnu``, and the dark stack's ``exposure_s``); ``frames``: the images of an
+    image input (analysed by :func:`bench_sim.metrics.frame_series.analyse_frames`);
+    ``quantization_var_dn2``: the rounding's variance in the dark noise (a table's own, else
+    ``1/12``); ``text``: text keys of a results TOML (name, source).
     """
 
     kind: str
@@ -78,6 +113,8 @@ class CalibrationInput:
     results: dict[str, float] = field(default_factory=dict)
     spatial: dict[str, float] = field(default_factory=dict)
     text: dict[str, str] = field(default_factory=dict)
+    frames: FrameSeries | None = None
+    quantization_var_dn2: float = QUANTIZATION_VAR_DN2
 
 
 def _rows(path: Path) -> tuple[list[str], list[list[str]]]:
@@ -92,19 +129,27 @@ def _rows(path: Path) -> tuple[list[str], list[list[str]]]:
     return [h.strip() for h in rows[0]], rows[1:]
 
 
+def _table_columns(path: Path, header: list[str]) -> None:
+    """Refuse a table without its required columns (an exposure, a mean and a variance)."""
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    for raw, sub in (("mean_dn", "signal_dn"), ("var_dn2", "signal_var_dn2")):
+        if raw not in header and sub not in header:
+            missing.append(f"{raw} (or {sub}, dark-subtracted)")
+    if missing:
+        raise BenchSimError(
+            f"{path}: missing column(s) {', '.join(missing)}; required: exposure_s, mean_dn or signal_dn, "
+            "var_dn2 or signal_var_dn2"
+        )
+
+
 def read_table_csv(path: Path) -> CalibrationInput:
     """Read a photon-transfer table (CSV, see the module doc) into a checked :class:`PtcTable`."""
     header, rows = _rows(path)
-    missing = [c for c in REQUIRED_COLUMNS if c not in header]
-    if missing:
-        raise BenchSimError(
-            f"{path}: missing column(s) {', '.join(missing)}; required: {', '.join(REQUIRED_COLUMNS)}"
-        )
+    _table_columns(path, header)
     for i, r in enumerate(rows):
         if len(r) != len(header):
             raise BenchSimError(f"{path}: row {i + 1} has {len(r)} fields, the header {len(header)}")
-    data = {c: [r[header.index(c)].strip() for r in rows] for c in (*REQUIRED_COLUMNS, *_OPTIONAL_COLUMNS)
-            if c in header}
+    data = {c: [r[header.index(c)].strip() for r in rows] for c in header if c in _ALL_COLUMNS}
 
     def const(name: str) -> float | None:
         if name not in data:
@@ -130,21 +175,46 @@ def read_table_csv(path: Path) -> CalibrationInput:
                 raise BenchSimError(f"{path}: row {i + 1}: {name} = {v!r} is not a number") from exc
         return out
 
-    pixels, bits = const("pixels"), const("bits")
+    dark = None
+    if "kind" in data:
+        kinds = [v.lower() for v in data["kind"]]
+        bad = next((i for i, v in enumerate(kinds) if v not in _ROW_KINDS), None)
+        if bad is not None:
+            raise BenchSimError(f"{path}: row {bad + 1}: kind = {data['kind'][bad]!r}; allowed: dark, flat")
+        dark = [_ROW_KINDS[v] for v in kinds]
+    consts = {k: const(k) for k in ("pixels", "bits", "images", "wavelength_nm", "quantization_var_dn2")}
     table = make_table(
-        num("exposure_s"), num("photons_per_pixel"), num("mean_dn"), num("var_dn2"),
-        num("dark_mean_dn"), num("dark_var_dn2"), pixels=None if pixels is None else int(pixels),
-        bits=None if bits is None else int(bits), wavelength_nm=const("wavelength_nm"), source=str(path),
+        num("exposure_s"),
+        photons_per_pixel=num("photons_per_pixel"),
+        relative_irradiance=num("relative_irradiance"),
+        mean_dn=num("mean_dn"),
+        var_dn2=num("var_dn2"),
+        signal_dn=num("signal_dn"),
+        signal_var_dn2=num("signal_var_dn2"),
+        dark_mean_dn=num("dark_mean_dn"),
+        dark_var_dn2=num("dark_var_dn2"),
+        dark=dark,
+        pixels=None if consts["pixels"] is None else int(consts["pixels"]),
+        bits=None if consts["bits"] is None else int(consts["bits"]),
+        images=2 if consts["images"] is None else int(consts["images"]),
+        dark_images=2 if consts["images"] is None else int(consts["images"]),
+        wavelength_nm=consts["wavelength_nm"],
+        source=str(path),
     )
-    return CalibrationInput(kind="table", path=path, table=table)
+    q = consts["quantization_var_dn2"]
+    return CalibrationInput(
+        kind="table", path=path, table=table, quantization_var_dn2=QUANTIZATION_VAR_DN2 if q is None else q
+    )
 
 
 def _check_results(path: Path, values: dict[str, float]) -> dict[str, float]:
     for key, (required, lo, hi, meaning) in RESULT_KEYS.items():
         if key not in values:
             if required:
-                raise BenchSimError(f"{path}: missing {key} ({meaning}); required: K_dn_per_e, "
-                                    "dark_noise_e, saturation_capacity_e")
+                raise BenchSimError(
+                    f"{path}: missing {key} ({meaning}); required: K_dn_per_e, "
+                    "dark_noise_e, saturation_capacity_e"
+                )
             continue
         v = values[key]
         ok = math.isfinite(v) and (lo < v <= hi if key in ("K_dn_per_e", "qe") else lo <= v <= hi)
@@ -269,14 +339,26 @@ def read_descriptor(path: Path) -> CalibrationInput:
         spatial = {"dsnu_dn": sp["dsnu_e"], "prnu": sp["prnu"], "exposure_s": stack_t["d"]}
     lit = sorted((r for r in rows if r[1] > 0), key=lambda r: r[1])
     arr = np.array([*(r for r in rows if r[1] == 0), *lit], dtype=np.float64).reshape(-1, 4)
-    table = make_table(arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3], pixels=width * height, bits=bits,
-                       source=str(path))
+    table = make_table(
+        arr[:, 0],
+        photons_per_pixel=arr[:, 1],
+        mean_dn=arr[:, 2],
+        var_dn2=arr[:, 3],
+        pixels=width * height,
+        bits=bits,
+        source=str(path),
+    )
     return CalibrationInput(kind="descriptor", path=path, table=table, spatial=spatial)
 
 
+def _images(p: Path) -> CalibrationInput:
+    series = read_frames_folder(p) if p.is_dir() else read_frames_file(p)
+    return CalibrationInput(kind="images", path=p, frames=series)
+
+
 def read_input(path: str | Path) -> CalibrationInput:
-    """Read any calibration input by its suffix (``.csv``, ``.toml``, ``.xml``, a descriptor
-    ``.txt`` or a folder holding one)."""
+    """Read any calibration input by its suffix (``.csv``, ``.toml``, ``.xml``, a frames
+    ``.npz``, a descriptor ``.txt``, or a folder holding ``frames.csv`` or a descriptor)."""
     p = Path(path)
     if not p.exists():
         raise BenchSimError(f"{p}: no such file or folder")
@@ -284,12 +366,15 @@ def read_input(path: str | Path) -> CalibrationInput:
     if problem is not None and not p.is_dir():
         raise BenchSimError(f"{p}: {problem}")
     suffix = p.suffix.lower()
+    if (p.is_dir() and (p / MANIFEST).is_file()) or suffix == ".npz":
+        return _images(p)
     if p.is_dir() or suffix == ".txt":
         return read_descriptor(p)
     readers = {".csv": read_table_csv, ".toml": read_results_toml, ".xml": read_results_xml}
     if suffix not in readers:
         raise BenchSimError(
             f"{p}: unknown input type {suffix or '(no suffix)'!r}; allowed: .csv (photon-transfer table), "
-            ".toml or .xml (EMVA 1288 results), .txt or a folder (EMVA 1288 descriptor with images)"
+            ".toml or .xml (EMVA 1288 results), .npz or a folder with frames.csv (images), .txt or a "
+            "folder (EMVA 1288 descriptor with images)"
         )
     return readers[suffix](p)

@@ -5,7 +5,7 @@ finding the settings and starting one's own bench from the shipped examples.
 type, unit, default, allowed range, typical range, description), as text or as the Markdown
 table of ``docs/config-reference.md``. ``config show`` prints a config resolved through its
 ``base`` chain, as the TOML every output carries. ``init`` copies the shipped scenes, scenario
-presets, sweep and dataset specs and example targets (``bench_sim/scenes/``) into a new folder,
+presets, sweep, dataset and design specs and example targets (``bench_sim/scenes/``) into a new folder,
 keeping their layout so the relative paths inside them (``base = "../paper_rig.toml"``, the
 dataset's image glob) still work.
 """
@@ -13,6 +13,7 @@ dataset's image glob) still work.
 from __future__ import annotations
 
 import difflib
+import functools
 import os
 import shutil
 import tempfile
@@ -22,9 +23,12 @@ from typing import Annotated
 import typer
 
 from bench_sim.config import DEFAULT_CONFIG_PATH, SCENES_DIR, config_to_toml_text, load_config
-from bench_sim.config.catalogue import KeyInfo, config_keys, config_sections
+from bench_sim.config.catalogue import KeyInfo, config_keys, config_sections, model_keys
+from bench_sim.config.plausible import Typical
 from bench_sim.errors import BenchSimError
 from bench_sim.io.interrupts import deferred_interrupts
+from bench_sim.sensor.effects.base import Effect
+from bench_sim.sensor.effects.chain import effect_kinds, sensor_chain
 
 __all__ = [
     "keys_text", "keys_markdown", "show_text", "init_folder", "INIT_IGNORED", "config_app", "init_command",
@@ -34,8 +38,27 @@ __all__ = [
 INIT_IGNORED = ("__pycache__", "*.pyc", ".*")
 
 
+def _typical_of(cls: type[Effect], key: str) -> Typical | None:
+    """The typical range of an effect's key (its ``TYPICAL``, by the key's last part)."""
+    return cls.TYPICAL.get(key.rsplit(".", 1)[-1])
+
+
+def effect_keys() -> list[KeyInfo]:
+    """The keys of every sensor effect, ``sensor.effects.<name>[kind=KIND].KEY``, from each
+    effect's own parameters (:mod:`bench_sim.sensor.effects`), after its ``kind`` line."""
+    out = []
+    for kind, cls in effect_kinds().items():
+        prefix = f"sensor.effects.<name>[kind={kind}]."
+        out.append(KeyInfo(prefix + "kind", "str", "", f'"{kind}"', "", "", cls.summary))
+        out.extend(model_keys(cls.Params, prefix, functools.partial(_typical_of, cls)))
+    return out
+
+
 def _chosen(section: str | None) -> list[KeyInfo]:
     keys = config_keys(section)
+    head = (section or "").rstrip(".").split("<")[0]
+    if "sensor.effects".startswith(head) or head.startswith("sensor.effects"):
+        keys += [k for k in effect_keys() if k.key.startswith(head)]
     if not keys:
         names = config_sections()
         close = difflib.get_close_matches(section or "", names, n=1, cutoff=0.5)
@@ -83,6 +106,7 @@ def show_text(config: Path) -> str:
     """The config ``config`` resolved through its ``base`` chain, as TOML (with a comment naming
     the file); a bad config is the one-line error of :func:`bench_sim.config.load_config`."""
     cfg = load_config(config)
+    sensor_chain(cfg.sensor)  # its effects checked as every command checks them
     return f"# {Path(config).resolve()}, resolved (base chain applied, defaults filled in)\n" + (
         config_to_toml_text(cfg)
     )
@@ -189,7 +213,7 @@ def config_show_command(
 def init_command(
     folder: Annotated[Path, typer.Argument(help="new (or empty) folder for the example configs")],
 ) -> None:
-    """Copy the example scenes, scenario presets, sweep and dataset specs and targets to start from."""
+    """Copy the example scenes, scenario presets, sweep, dataset and design specs and targets."""
     written = init_folder(folder)
     configs = ", ".join(str(p) for p in written if p.suffix == ".toml")
     print(f"wrote {len(written)} files to {folder}/: {configs}")

@@ -38,8 +38,10 @@ __all__ = [
     "target_memory",
     "estimate_render",
     "estimate_simulate",
+    "estimate_design",
     "estimate_reproduce",
     "estimate_ptc",
+    "estimate_area_ptc",
     "estimate_fuse",
     "estimate_tasks",
 ]
@@ -182,9 +184,25 @@ def estimate_simulate(cfg: BenchConfig, stages: Iterable[int], fmt: str | None =
     else:
         mem[f"stage images and truth ({len(st)} stages x {cfg.lines} x {cfg.sensor.columns})"] = arrays + hdr
         mem["file encoding (largest variable)"] = n_pix * 8
-    # on disk the words take the widest word's bytes (an upper bound for any beta)
-    disk = {"stage images and truth": n_pix * stage_pixel_bytes(None, truth=True), "hdr and maps": hdr}
+    # on disk: the stored schema (the word in its smallest type, the truth in float32), uncompressed
+    stored = stage_pixel_bytes(cfg.dtdi.beta_bits, truth=True, stored=True)
+    image_stored = sum(v.stored_dtype(cfg.dtdi.beta_bits).itemsize for v in images)
+    disk = {"stage images and truth": n_pix * stored,
+            "hdr and maps": cfg.lines * cfg.sensor.columns * image_stored}
     return ResourceEstimate("simulate", mem, disk, _hint(cfg, f"the stages ({len(st)})"))
+
+
+def estimate_design(cfg: BenchConfig, stages: Iterable[int]) -> ResourceEstimate:
+    """One point of ``bench-sim design``: a pass with its truth at ``stages`` kept in memory
+    (:func:`estimate_simulate`), and the candidates' arrays over those stages (float64 signals,
+    truth, light per row, the word's, the clip flags and regions:
+    :mod:`bench_sim.measure.design_scores`, two words' worth at once)."""
+    st = sorted(int(m) for m in stages)
+    est = estimate_simulate(cfg, st)
+    n_pix = len(st) * cfg.lines * cfg.sensor.columns
+    mem = dict(est.memory_bytes)
+    mem[f"candidate arrays ({len(st)} stages x {cfg.lines} x {cfg.sensor.columns})"] = n_pix * (5 * 8 + 10)
+    return ResourceEstimate("design", mem, {}, est.hint)
 
 
 def estimate_reproduce(cfg: BenchConfig, stages: Iterable[int]) -> ResourceEstimate:
@@ -216,6 +234,15 @@ def estimate_ptc(
     disk = {f"{images} 16-bit TIFF images": images * (img * 2 + 4096), "tables and plots": 2 * MiB}
     hint = f"lower the stages ({s}) or the image size ({lines} x {columns})"
     return ResourceEstimate("ptc", mem, disk, hint)
+
+
+def estimate_area_ptc(rows: int, columns: int, frames: int) -> ResourceEstimate:
+    """``bench-sim ptc --area``: the raw frames (uint16, and float64 stacks while analysed) and
+    the compressed ``frames.npz``."""
+    img = rows * columns
+    mem = {"interpreter and libraries": BASE_PROCESS_BYTES, f"{frames} raw frames": frames * img * (2 + 8)}
+    disk = {"frames.npz": frames * img * 2, "tables and plots": 2 * MiB}
+    return ResourceEstimate("ptc --area", mem, disk, f"use a smaller window than {rows} x {columns}")
 
 
 def estimate_fuse(shape: tuple[int, ...], tra: bool) -> ResourceEstimate:

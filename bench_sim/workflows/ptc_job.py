@@ -53,12 +53,15 @@ from bench_sim.measure.ptc import (
     analyse_ptc,
     measure_ptc,
     plan_ptc,
+    stage_quantization_var_dn2,
 )
-from bench_sim.runtime.provenance import provenance
+from bench_sim.workflows.area_ptc_job import run_area_ptc
 from bench_sim.workflows.estimates import estimate_ptc
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
+from bench_sim.workflows.simulate import parse_stages_arg
 
-__all__ = ["write_ptc", "run_ptc", "SUMMARY_COLUMNS"]
+__all__ = ["write_ptc", "run_ptc", "run_ptc_command", "SUMMARY_COLUMNS"]
 
 def _plots(results: dict[int, StageResult]) -> dict[str, Any]:
     """The PTC and SNR figures (matplotlib, not yet written)."""
@@ -199,17 +202,21 @@ def _level_rows(plan: PtcPlan, results: dict[int, StageResult]) -> list[list[Any
 
 
 #: Columns of ``stage_MMM/ptc_table.csv``: the photon-transfer table ``bench-sim calibrate`` reads.
-TABLE_COLUMNS = ("exposure_s", "photons_per_pixel", "mean_dn", "var_dn2", "pixels", "bits")
+TABLE_COLUMNS = (
+    "exposure_s", "photons_per_pixel", "mean_dn", "var_dn2", "pixels", "bits", "quantization_var_dn2",
+)
 
 
 def _table_rows(cfg: BenchConfig, m: int, plan: PtcPlan, r: StageResult) -> list[list[Any]]:
     """Stage ``m``'s photon-transfer table (the dark level first; photons summed over the stage's
-    ``m`` frames; exposure ``m t_int``; the word's bits)."""
+    ``m`` frames; exposure ``m t_int``; the word's bits; the rounding's variance, ``m / 12`` for
+    ``m`` quantised reads): ``calibrate`` fits it with the estimator ``ptc`` used."""
     t = m * cfg.timing.t_int_s
     px, bits = plan.lines * plan.columns, cfg.dtdi.beta_bits
-    rows: list[list[Any]] = [[t, 0.0, r.dark_mean_dn, r.dark_var_dn2, px, bits]]
+    q = stage_quantization_var_dn2(cfg, m)
+    rows: list[list[Any]] = [[t, 0.0, r.dark_mean_dn, r.dark_var_dn2, px, bits, q]]
     for p, mean, var in zip(m * r.photons_per_frame, r.mean_dn, r.var_dn2, strict=True):
-        rows.append([t, float(p), float(mean), float(var), px, bits])
+        rows.append([t, float(p), float(mean), float(var), px, bits, q])
     return rows
 
 
@@ -313,3 +320,13 @@ def run_ptc(
     images = measure_ptc(cfg, plan, int(seed))
     results = analyse_ptc(cfg, plan, images)
     return write_ptc(out, cfg, int(seed), plan, images, results)
+
+
+def run_ptc_command(cfg: BenchConfig, stages: str, seed: int, out: Path, *, area: bool = False) -> None:
+    """``bench-sim ptc``: the stages' series (:func:`run_ptc`, ``--stages`` as the command line
+    gives it), or with ``area`` the area sensor's raw frames
+    (:func:`bench_sim.workflows.area_ptc_job.run_area_ptc`; ``--stages`` not used)."""
+    if area:
+        run_area_ptc(cfg, seed=seed, out=out)
+        return
+    run_ptc(cfg, stages=list(parse_stages_arg(stages, cfg.sensor.rows)), seed=seed, out=out)

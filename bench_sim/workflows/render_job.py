@@ -37,8 +37,9 @@ from bench_sim.errors import BenchSimError
 from bench_sim.io import output_set, read_exr, write_exr, write_json
 from bench_sim.render.exposures import render_photons
 from bench_sim.render.texture import ground_truth_reflectance
-from bench_sim.runtime.provenance import provenance, render_provenance
+from bench_sim.runtime.provenance import render_provenance
 from bench_sim.workflows.estimates import estimate_render
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
 
 __all__ = [

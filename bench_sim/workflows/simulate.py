@@ -21,25 +21,25 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, load_config, warn_config, with_overrides
 from bench_sim.errors import BenchSimError
-from bench_sim.io import output_set, write_json
+from bench_sim.io import output_set, write_csv, write_json
 from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.io.strict_json import strict_dumps
-from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges, sharpness_summary
+from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges, sharpness_curves, sharpness_summary
 from bench_sim.pipeline import (
     IMAGE_DIMS,
     PASS_VARIABLES,
     STAGE_DIMS,
     PassResult,
     Variable,
-    check_stages,
     pass_variables,
     run_pass,
+    stored_dataset,
 )
 from bench_sim.render.exposures import RenderSetup
-from bench_sim.runtime.provenance import provenance
-from bench_sim.sensor.dtdi import frames_needed
+from bench_sim.sensor.dtdi import check_stages, frames_needed
 from bench_sim.sensor.pass_lines import PassSink
 from bench_sim.workflows.estimates import estimate_simulate
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
 from bench_sim.workflows.simulate_store import ZarrPassSink
 
@@ -154,6 +154,8 @@ def check_inputs(
 
 #: ``--format`` values and the file each writes into ``--out``
 FORMATS = {"zarr": "simulation.zarr", "netcdf": "simulation.nc", "tiff": "meta.json"}
+#: the TIFF set's table of the mean e-SFR curves per stage (a slanted-edge target)
+SFR_CURVES_FILE = "sfr_curves.csv"
 
 
 def parse_stages_arg(text: str, rows: int) -> tuple[int, ...]:
@@ -182,19 +184,25 @@ def parse_stages_arg(text: str, rows: int) -> tuple[int, ...]:
 def tiff_dtype(var: Variable) -> np.dtype:
     """The 32-bit TIFF sample type of a variable: ``uint32`` for integer and boolean variables,
     ``float32`` for the others."""
-    return np.dtype(np.uint32 if np.dtype(var.stored_dtype).kind in "uib" else np.float32)
+    return np.dtype(np.uint32 if var.stored_dtype(None).kind in "uib" else np.float32)
 
 
 def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, Any]) -> list[str]:
     """Write a simulation into ``folder`` as ``fmt`` (see :data:`FORMATS`); returns the names.
 
     ``zarr``: ``simulation.zarr`` (Zarr v3, consolidated metadata: ``xarray.open_zarr`` opens it);
-    ``netcdf``: ``simulation.nc``; ``tiff``: one 32-bit TIFF per stage and variable,
+    ``netcdf``: ``simulation.nc``; both in the one file schema of ``simulate`` and the data sets
+    (:func:`bench_sim.pipeline.stored_dataset`: words in the smallest unsigned type, the truth in
+    float32, chunks of whole stages); ``tiff``: one 32-bit TIFF per stage and variable,
     ``stage_MMM_VARIABLE.tiff`` (integer and boolean variables uint32, the others float32), ``gamma_hdr.tiff``
     and ``gamma_hdr_source.tiff`` when fused, each with its units and the provenance as JSON in the
     ImageDescription tag, plus ``meta.json`` (provenance, units, file list and, with slanted
-    edges, the MTF50s of :func:`bench_sim.measure.sharpness.sharpness_summary`).
+    edges, the MTF50s of :func:`bench_sim.measure.sharpness.sharpness_summary`) and, with slanted
+    edges, ``sfr_curves.csv`` (the mean e-SFR curve of every stage and direction,
+    :func:`bench_sim.measure.sharpness.sharpness_curves`).
     """
+    if fmt in ("zarr", "netcdf"):
+        ds = stored_dataset(ds, int(ds.attrs["beta_bits"]))
     # never cut by Ctrl-C (held, then delivered): Zarr writes on its own thread, and the locks of
     # xarray and HDF5 an interruption leaves held would deadlock the store's close
     if fmt == "zarr":
@@ -227,8 +235,13 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
         if var.name in ds:
             put(f"{var.name}.tiff", ds[var.name].values, var, None)
     sharp = sharpness_summary(ds)  # the MTF50s of a slanted-edge target (none otherwise)
+    curves = sharpness_curves(ds)
+    if curves:  # and their mean e-SFR curves
+        write_csv(folder / SFR_CURVES_FILE, ["stage", "direction", "frequency_cyc_px", "sfr"], curves,
+                  {**meta, "directions": "along the track: near-horizontal edges (cycles/line); across: "
+                   "near-vertical edges (cycles/column); frequencies along the edge normal"})
     write_json(folder / "meta.json", {**meta, "files": files, "dims": ["line", "column"], **sharp})
-    return [*files, "meta.json"]
+    return [*files, *([SFR_CURVES_FILE] if curves else []), "meta.json"]
 
 
 def run_simulate(

@@ -1,17 +1,17 @@
 """``simulate``'s Zarr store, written block by block while the pass runs (flat memory).
 
 :class:`ZarrPassSink` is the :class:`bench_sim.sensor.pass_lines.PassSink` of
-:func:`bench_sim.pipeline.run_pass` that ``bench-sim simulate --format zarr`` streams into. It
-first creates the whole store -- the dataset's schema exactly as :func:`bench_sim.pipeline.run_pass`'s
-:class:`xarray.Dataset` would be written by ``to_zarr`` (dimensions, dtypes, Zarr's own chunk
-shapes, units and long names, the coordinates, the config, seed and version attributes,
-consolidated metadata) -- with no data, then receives every variable's completed lines and writes
-each row of chunks (all stages, the chunk's lines, all columns) as soon as all its lines are in,
-every chunk once, whole. The rows in flight (the lines of about ``max(stages)`` plus a band of
-the truth, rounded out to Zarr's chunks, which grow with the number of lines) wait in raw files
-beside the store, not in memory: memory holds one block of lines and, while a row is written, one
-chunk's stages of it, whatever the number of lines. The store's bytes equal those of the in-memory
-dataset written at the end (the same values into the same chunks).
+:func:`bench_sim.pipeline.run_pass` that ``bench-sim simulate --format zarr`` streams into. It first
+creates the whole store -- the dataset's schema exactly as :func:`bench_sim.pipeline.run_pass`'s
+:class:`xarray.Dataset` would be written by ``simulate`` (:func:`bench_sim.pipeline.stored_dataset`:
+dimensions, stored dtypes, chunks, units and long names, the coordinates, the config, seed and
+version attributes, consolidated metadata) -- with no data, then receives every variable's completed
+lines and writes each row of chunks (all stages, the chunk's lines, all columns) as soon as all its
+lines are in, every chunk once, whole. The rows in flight (the lines of about ``max(stages)`` plus a
+band of the truth, rounded out to the store's chunks) wait in raw
+files beside the store, not in memory: memory holds one block of lines and, while a row is written,
+one chunk's stages of it, whatever the number of lines. The store's bytes equal those of the
+in-memory dataset written at the end (the same values into the same chunks).
 """
 
 from __future__ import annotations
@@ -31,26 +31,18 @@ from bench_sim.pipeline import (
     pass_attrs,
     pass_coords,
     pass_dtypes,
+    store_chunks,
+    variable_attrs,
 )
 from bench_sim.render.exposures import RenderSetup
 
 if TYPE_CHECKING:
     import xarray as xr
 
-__all__ = ["ZarrPassSink", "zarr_auto_chunks"]
+__all__ = ["ZarrPassSink"]
 
 #: folder beside the store that holds the rows of chunks in flight (removed when the pass ends)
 _SPILL_DIR = ".simulate_rows"
-
-
-def zarr_auto_chunks(shape: tuple[int, ...], dtype: np.dtype) -> tuple[int, ...]:
-    """The chunk shape Zarr picks by itself for an array (what ``to_zarr`` of a numpy-backed
-    variable gets)."""
-    import zarr
-
-    store = zarr.storage.MemoryStore()
-    arr = zarr.create_array(store=store, shape=shape, dtype=dtype, chunks="auto", zarr_format=3)
-    return tuple(int(c) for c in arr.chunks)
 
 
 def _template(
@@ -63,14 +55,15 @@ def _template(
     stage_dt, image_dt = pass_dtypes(cfg, st, truth=truth)
     lines, cols = cfg.lines, cfg.sensor.columns
     data: dict[str, Any] = {}
-    for name, dt in {**stage_dt, **image_dt}.items():
+    for name in {**stage_dt, **image_dt}:
         var = VARIABLES_BY_NAME[name]
         shape = (len(st), lines, cols) if name in stage_dt else (lines, cols)
-        data[name] = (var.dims, da.empty(shape, dtype=dt, chunks=zarr_auto_chunks(shape, dt)))
+        dt = var.stored_dtype(cfg.dtdi.beta_bits)
+        data[name] = (var.dims, da.empty(shape, dtype=dt, chunks=store_chunks(var.dims, shape)))
     order = [v.name for v in VARIABLES_BY_NAME.values() if v.name in data]
     ds = xr.Dataset({n: data[n] for n in order}, coords=pass_coords(cfg, st))
     for key, v in ds.data_vars.items():
-        v.attrs.update(units=VARIABLES_BY_NAME[str(key)].units, long_name=VARIABLES_BY_NAME[str(key)].doc)
+        v.attrs.update(variable_attrs(cfg, str(key)))
     for coord, attrs in COORD_ATTRS.items():
         ds[coord].attrs.update(attrs)
     ds.attrs.update(pass_attrs(cfg, seed, setup, fused=bool(image_dt)))

@@ -35,7 +35,8 @@ def bench_sim(*args: str) -> str:
     return done.stdout
 
 
-print(bench_sim("init", "start"))
+if not Path("start").is_dir():  # the tutorials run one after another in one folder: init once
+    print(bench_sim("init", "start"))
 
 # %% [markdown]
 # Draw a target: an 8-bit grey ramp with three dark bars, as a PNG. Integer images are mapped

@@ -30,7 +30,8 @@ def bench_sim(*args: str) -> str:
     return done.stdout
 
 
-bench_sim("init", "start")
+if not Path("start").is_dir():  # made by tutorial 1 when they run in one folder
+    bench_sim("init", "start")
 
 # %% [markdown]
 # The fill alone lights a uniform print and flickers with depth 1 (it goes dark at its troughs).

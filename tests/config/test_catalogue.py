@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 from bench_sim.cli import app
 from bench_sim.config import BenchConfig, config_from_dict, config_to_toml_dict
 from bench_sim.config.catalogue import config_keys, unit_of
+from bench_sim.workflows.config_cmd import effect_keys
 
 runner = CliRunner()
 
@@ -56,7 +57,7 @@ def test_cli_listing_holds_every_key_and_unit() -> None:
     r = runner.invoke(app, ["config", "keys"])
     assert r.exit_code == 0, r.stderr
     heads = [ln.split("  ")[0] for ln in r.stdout.splitlines() if not ln.startswith(" ")]
-    assert heads == [k.key for k in config_keys()]
+    assert heads == [k.key for k in config_keys()] + [k.key for k in effect_keys()]
     assert "timing.line_period_s  float [s] = 0.0001" in r.stdout
     assert "sensor.full_well_e  float [e-] = 13500" in r.stdout
 

@@ -11,8 +11,10 @@ import pytest
 
 from bench_sim.config import config_from_dict
 from bench_sim.errors import BenchSimError
-from bench_sim.measure.calibration import MIN_LINEAR_POINTS, fit_camera, make_table, wls_line
 from bench_sim.measure.uniform_field import measurement_pedestal_dn
+from bench_sim.metrics.emva_fit import MIN_LINEAR_POINTS, fit_camera
+from bench_sim.metrics.ptc_table import make_table
+from bench_sim.metrics.weighted_fit import wls_line
 from bench_sim.sensor.saturation import stage_clip_kind, stage_variance_maximum_photons
 from bench_sim.workflows.calibrate_inputs import read_input
 from bench_sim.workflows.ptc_job import run_ptc
@@ -130,11 +132,14 @@ def test_bad_tables_are_refused_in_one_line(change: dict, needle: str) -> None:
     assert needle in str(exc.value) and "\n" not in str(exc.value)
 
 
-def test_no_saturation_too_few_linear_points_and_no_dark_are_refused() -> None:
+def test_a_table_ending_at_the_peak_gives_a_lower_bound_and_bad_ones_are_refused() -> None:
     cols = _table()
     cut = {k: v[:30] for k, v in cols.items()}  # stops below the clip: the variance still grows
-    with pytest.raises(BenchSimError, match="no saturation reached"):
-        fit_camera(make_table(**cut))
+    fit = fit_camera(make_table(**cut))
+    assert fit.saturation_lower_bound and fit.clips_on == "unknown"
+    assert fit.saturation_index == 28
+    assert fit.saturation_signal_dn == pytest.approx(cols["mean_dn"][29] - 10.0)
+    assert not fit_camera(make_table(**cols)).saturation_lower_bound
     few = _table(n=6)
     with pytest.raises(BenchSimError, match=f"need at least {MIN_LINEAR_POINTS}"):
         fit_camera(make_table(**few))

@@ -14,7 +14,6 @@ from bench_sim.metrics.emva1288 import (
     dark_temporal_noise_e,
     dynamic_range_db,
     dynamic_range_from_series,
-    fit_conversion_gain,
     mean_var_from_pair,
     photons_at_snr,
     photons_min_model,
@@ -22,6 +21,8 @@ from bench_sim.metrics.emva1288 import (
     spatial_nonuniformity,
     stack_mean_var,
 )
+from bench_sim.metrics.emva_fit import fit_camera
+from bench_sim.metrics.ptc_table import make_table
 
 #: closed forms, invariants and seeded statistical tests (make test-fast)
 pytestmark = pytest.mark.physics
@@ -163,16 +164,23 @@ def test_dark_noise_in_electrons_inverts_the_dn_variance() -> None:
 
 
 def test_conversion_gain_is_the_photon_transfer_slope_over_the_linear_range() -> None:
-    """Poisson electrons times K (plus a dark floor): the fitted slope is K within the scatter of
-    the variance estimates; levels above 70 % of saturation (here with a wrong slope) are not
-    used."""
+    """Poisson electrons times K (plus a dark floor), clipped: the fitted slope is K within its
+    reported standard error (absolute weights: one pixel, n samples per level); levels above
+    70 % of saturation are not in the fit."""
     rng = np.random.default_rng(11)
-    k = 0.25
-    electrons = np.geomspace(50, 20000, 30)
-    samples = rng.poisson(electrons[:, None], (30, 20000)) * k + rng.normal(0, 2.0, (30, 20000))
+    k, n = 0.25, 20000
+    electrons = np.geomspace(50, 30000, 36)
+    reads = rng.poisson(electrons[:, None], (36, n)) * k + rng.normal(0, 2.0, (36, n))
+    samples = np.minimum(reads, k * 21000)
+    dark = rng.normal(0, 2.0, (2, n))
     mean, var = samples.mean(axis=1), samples.var(axis=1, ddof=1)
-    var[mean > 0.7 * k * 20000] *= 3.0  # outside the fit range: must not matter
-    assert fit_conversion_gain(mean, var, 0.0, 4.0, k * 20000) == pytest.approx(k, rel=0.01)
+    tab = make_table(
+        np.ones(37), photons_per_pixel=np.r_[0.0, electrons / 0.5], mean_dn=np.r_[dark.mean(), mean],
+        var_dn2=np.r_[dark.var(ddof=1), var], pixels=1, images=n, dark_images=2 * n,
+    )
+    fit = fit_camera(tab)
+    assert abs(fit.k_dn_per_e - k) < 3.5 * fit.k_se and fit.k_se < 0.01 * k
+    assert fit.linear.any() and mean[fit.linear].max() - dark.mean() <= 0.7 * fit.saturation_signal_dn
 
 
 def test_spatial_nonuniformity_from_stacks() -> None:

@@ -18,7 +18,8 @@ import pytest
 from scipy.special import ndtr
 
 from bench_sim.errors import BenchSimError
-from bench_sim.metrics.sfr import edge_sfr, mtf50, mtf_at
+from bench_sim.metrics.sfr import INVALID_MAX_FRACTION, edge_sfr, mtf50, mtf_at
+from bench_sim.metrics.sfr_readings import SHARPENING_PEAK, axis_frequency, mtf50p
 
 pytestmark = pytest.mark.physics
 
@@ -74,22 +75,34 @@ def expected(f: np.ndarray, angle_deg: float, *, sigma: float = 0.0, smear: floa
     return out * np.abs(np.sinc(smear * f * ny))
 
 
-ANGLES = (2.0, 3.5, 5.0, 7.0, 10.0)
+#: 2..39 degrees: the command takes 1..40 (a frequency axis off by cos(angle) costs 6-13 % at 20-30)
+ANGLES = (2.0, 3.5, 5.0, 7.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 39.0)
 #: noise rms [fraction of the step] -> tolerance of |SFR - closed form| up to Nyquist, up to
-#: 1 cycle/px, and of MTF50 (relative); 64 x 40 px ROIs
+#: 1 cycle/px, and of MTF50 (relative); 64 px along the edge (:func:`roi_shape`)
 TOLERANCES = {0.0: (0.02, 0.04, 0.03), 0.005: (0.03, 0.07, 0.05), 0.02: (0.08, 0.16, 0.11)}
+#: above 10 degrees the SFR between Nyquist and 1 cycle/px reads up to 0.07 high (noise-free), so
+#: that band's tolerance widens by this much (and, for the noise, the one up to Nyquist a little)
+WIDE_ANGLE_EXTRA = (0.015, 0.04, 0.0)
+
+
+def roi_shape(angle_deg: float, horizontal: bool = False, along: int = 64) -> tuple[int, int]:
+    """A ROI ``along`` px along the edge and wide enough across it for the edge's run
+    (``along tan(angle)``) plus 18 px either side (40 px up to 10 degrees)."""
+    across = 40 if angle_deg <= 10 else int(math.ceil(along * math.tan(math.radians(angle_deg)))) + 36
+    return (across, along) if horizontal else (along, across)
 
 
 def _check(img: np.ndarray, angle: float, noise: float, **kw: float) -> None:
     r = edge_sfr(img)
     f = r.frequency_cyc_px
     want = expected(f, angle, **kw)
-    tol_nyq, tol_1, tol_50 = TOLERANCES[noise]
+    extra = WIDE_ANGLE_EXTRA if angle > 10 else (0.0, 0.0, 0.0)
+    tol_nyq, tol_1, tol_50 = (a + b for a, b in zip(TOLERANCES[noise], extra, strict=True))
     dev = np.abs(r.sfr - want)
     assert dev[f <= 0.5].max() < tol_nyq, (angle, noise, kw, dev[f <= 0.5].max())
     assert dev[f <= 1.0].max() < tol_1, (angle, noise, kw, dev.max())
     assert abs(r.mtf50_cyc_px / mtf50(f, want) - 1) < tol_50, (angle, noise, kw, r.mtf50_cyc_px)
-    assert r.edge_angle_deg == pytest.approx(angle, abs=0.05 if noise < 0.02 else 0.1)
+    assert r.edge_angle_deg == pytest.approx(angle, abs=0.05 if noise < 0.02 else 0.15)
     assert r.mtf_nyquist == pytest.approx(mtf_at(f, r.sfr, 0.5))
     assert abs(r.mtf_nyquist - float(expected(np.array([0.5]), angle, **kw)[0])) < tol_1
 
@@ -99,7 +112,7 @@ def _check(img: np.ndarray, angle: float, noise: float, **kw: float) -> None:
 def test_gaussian_psf_gives_gaussian_mtf(angle: float, noise: float) -> None:
     rng = np.random.default_rng(int(angle * 10) + int(noise * 1000))
     for sigma in (0.6, 1.2):
-        img = edge_image((64, 40), angle, sigma=sigma)
+        img = edge_image(roi_shape(angle), angle, sigma=sigma)
         _check(img + rng.normal(0, noise * (HI - LO), img.shape), angle, noise, sigma=sigma)
 
 
@@ -108,14 +121,14 @@ def test_gaussian_psf_gives_gaussian_mtf(angle: float, noise: float) -> None:
 def test_box_smear_along_track_gives_sinc(angle: float, noise: float) -> None:
     rng = np.random.default_rng(7 + int(angle * 10) + int(noise * 1000))
     for w in (1.0, 2.0, 3.0):
-        img = edge_image((40, 64), angle, smear=w, horizontal=True)
+        img = edge_image(roi_shape(angle, True), angle, smear=w, horizontal=True)
         _check(img + rng.normal(0, noise * (HI - LO), img.shape), angle, noise, smear=w, horizontal=True)
 
 
 @pytest.mark.parametrize("angle", ANGLES)
 def test_box_smear_first_zero_where_predicted(angle: float) -> None:
     for w in (2.0, 3.0):
-        r = edge_sfr(edge_image((40, 64), angle, smear=w, horizontal=True))
+        r = edge_sfr(edge_image(roi_shape(angle, True), angle, smear=w, horizontal=True))
         assert r.orientation == "horizontal"
         f, s = r.frequency_cyc_px, r.sfr
         zero = 1.0 / (w * np.cos(np.deg2rad(angle)))  # sinc(w f cos t) along the normal
@@ -129,7 +142,7 @@ def test_box_smear_first_zero_where_predicted(angle: float) -> None:
 def test_pixel_aperture_alone_gives_sinc(angle: float, noise: float) -> None:
     rng = np.random.default_rng(11 + int(angle * 10) + int(noise * 1000))
     for horizontal in (False, True):
-        shape = (40, 64) if horizontal else (64, 40)
+        shape = roi_shape(angle, horizontal)
         img = edge_image(shape, angle, horizontal=horizontal, offset=0.37)
         _check(img + rng.normal(0, noise * (HI - LO), shape), angle, noise, horizontal=horizontal)
 
@@ -174,9 +187,9 @@ def _two_edges() -> np.ndarray:
     return img
 
 
-def _with_nan() -> np.ndarray:
+def _mostly_nan() -> np.ndarray:
     img = edge_image((60, 40), 5.0, sigma=0.7)
-    img[3, 3] = np.nan
+    img[:, :21] = np.nan
     return img
 
 
@@ -194,7 +207,7 @@ def _with_nan() -> np.ndarray:
         (lambda: np.minimum(edge_image((60, 40), 5.0, sigma=0.7), 300.0), None, "clipped"),
         (lambda: _two_edges(), None, "edge"),
         (lambda: edge_image((60, 40), 5.0, sigma=0.7, offset=17.0), None, "side"),
-        (lambda: _with_nan(), None, "NaN"),
+        (lambda: _mostly_nan(), None, "pixels are invalid"),
     ],
 )
 def test_bad_inputs_one_line(make, roi, words: str) -> None:
@@ -202,3 +215,62 @@ def test_bad_inputs_one_line(make, roi, words: str) -> None:
         edge_sfr(make(), roi, saturation=300.0 if "clipped" in words else None)
     msg = str(err.value)
     assert words in msg and "\n" not in msg, msg
+
+
+@pytest.mark.parametrize("angle", (20.0, 30.0))
+def test_frequency_axis_is_the_edge_normal(angle: float) -> None:
+    """The closed form holds on the normal's frequencies; on the pixel axis they read
+    ``cos(angle)`` lower (what a row-axis tool reports), which the closed form rejects."""
+    sigma = 0.8
+    r = edge_sfr(edge_image(roi_shape(angle), angle, sigma=sigma))
+    truth = mtf50(r.frequency_cyc_px, expected(r.frequency_cyc_px, angle, sigma=sigma))
+    assert r.mtf50_cyc_px == pytest.approx(truth, rel=0.02)
+    on_rows = mtf50(axis_frequency(r.frequency_cyc_px, r.edge_angle_deg), r.sfr)
+    assert on_rows == pytest.approx(truth * math.cos(math.radians(angle)), rel=0.02)
+    assert abs(on_rows / truth - 1) > 0.05
+
+
+def test_invalid_pixels_are_left_out() -> None:
+    """NaN pixels and a mask (a block beside the edge, scattered pixels on it) leave the SFR as
+    the whole edge's; a mask of another shape and a ROI mostly invalid are refused."""
+    angle, sigma = 8.0, 0.8
+    img = edge_image((96, 48), angle, sigma=sigma)
+    clean = edge_sfr(img)
+    rng = np.random.default_rng(5)
+    holed = img.copy()
+    holed[rng.random(img.shape) < 0.03] = np.nan
+    valid = np.ones(img.shape, dtype=bool)
+    valid[10:30, 2:12] = False  # a block in the flat dark part
+    holed[10:30, 2:12] = 1e6  # whatever the masked pixels hold
+    r = edge_sfr(holed, valid=valid)
+    assert r.excluded_px == int((~valid | np.isnan(holed)).sum())
+    assert r.edge_angle_deg == pytest.approx(angle, abs=0.05)
+    f = r.frequency_cyc_px
+    np.testing.assert_allclose(r.sfr[f <= 0.5], clean.sfr[f <= 0.5], atol=0.02)
+    assert r.mtf50_cyc_px == pytest.approx(mtf50(f, expected(f, angle, sigma=sigma)), rel=0.03)
+    with pytest.raises(BenchSimError, match="mask's shape"):
+        edge_sfr(img, valid=np.ones((4, 4), dtype=bool))
+    half = np.ones(img.shape, dtype=bool)
+    half[: int(img.shape[0] * INVALID_MAX_FRACTION) + 1] = False
+    with pytest.raises(BenchSimError, match="invalid"):
+        edge_sfr(img, valid=half)
+
+
+def test_sharpening_flagged_and_mtf50p() -> None:
+    """A sharpening filter ``[-a/2, 1 + a, -a/2]`` along the rows multiplies the SFR by
+    ``1 + a (1 - cos(2 pi f cos t))``: its peak exceeds 1, MTF50P is that curve's, MTF50 is
+    inflated beyond it; an unsharpened edge has MTF50P = MTF50 and no flag."""
+    angle, sigma, a = 5.0, 0.5, 1.0
+    img = edge_image((64, 48), angle, sigma=sigma)
+    plain = edge_sfr(img)
+    assert not plain.sharpened and plain.mtf50p_cyc_px == pytest.approx(plain.mtf50_cyc_px, rel=1e-9)
+    sharp = img.copy()
+    sharp[:, 1:-1] = (1 + a) * img[:, 1:-1] - 0.5 * a * (img[:, :-2] + img[:, 2:])
+    r = edge_sfr(sharp[:, 1:-1])
+    f = r.frequency_cyc_px
+    want = expected(f, angle, sigma=sigma) * (1 + a * (1 - np.cos(2 * np.pi * f * np.cos(np.deg2rad(angle)))))
+    np.testing.assert_allclose(r.sfr[f <= 0.5], want[f <= 0.5], atol=0.03)
+    assert r.sharpened and r.sfr_peak > SHARPENING_PEAK
+    assert r.sfr_peak == pytest.approx(want[f <= 0.5].max(), abs=0.03)
+    assert r.mtf50p_cyc_px == pytest.approx(mtf50p(f, want), rel=0.03)
+    assert r.mtf50_cyc_px > r.mtf50p_cyc_px

@@ -56,6 +56,52 @@ def test_read_mean_and_variance_match_the_exact_distribution(lam, top, hi):
         assert abs(linear - mean) > 0.5
 
 
+@pytest.mark.parametrize(("lam", "top", "hi"), [
+    (7000.0, 511, None), (7100.0, 511, None), (7200.0, 511, None), (7300.0, 511, None),  # the ADC top
+    (11300.0, 1023, 800.0), (11500.0, 1023, 800.0),  # a word clip folded into the read
+])
+def test_a_read_pinned_to_a_clip_has_the_exact_variance(lam, top, hi):
+    """A read that mostly sits at a clip barely varies: the rounding's 1/12 DN^2 counts only where
+    the read is inside its clips (it was added in full: 0.083 DN^2 where the exact is 0.002)."""
+    rm = ReadModel(K, FW, SIGMA, float(top), True)
+    _, k2, _ = read_cumulants(np.array([lam]), 0.0, B, rm, hi_dn=hi)
+    p = _read_pmf(lam, top)
+    v = np.clip(np.arange(top + 1), 0, hi if hi is not None else top)
+    var = (p * v * v).sum() - (p * v).sum() ** 2
+    assert k2[0] == pytest.approx(var, rel=0.05, abs=2e-3)
+
+
+def _small_mean_moments(lam: float, offset: float, response) -> tuple[float, float]:
+    """Exact mean and variance of a read of Poisson mean ``lam`` through ``response``, offset
+    ``offset`` [DN] (sum over the counts, rounding, the clip at 0)."""
+    n = np.arange(int(lam + 12 * np.sqrt(lam) + 13))
+    d = np.arange(200)
+    mu = K * response(np.minimum(n, FW).astype(float)) + offset
+    cdf = stats.norm.cdf((np.append(d - 0.5, d[-1] + 0.5)[None, :] - mu[:, None]) / (K * SIGMA))
+    cdf[:, 0], cdf[:, -1] = 0.0, 1.0
+    p = stats.poisson.pmf(n, lam) @ np.diff(cdf, axis=1)
+    mean = (p * d).sum()
+    return mean, (p * d * d).sum() - mean**2
+
+
+@pytest.mark.parametrize(("offset", "curve"), [(20.0, "gamma"), (3.0, None)])
+def test_reads_of_small_means_follow_the_exact_poisson_law(offset, curve):
+    """Poisson means of 0 to 80 e- in one call, through a gamma curve (every read is integrated)
+    or near the clip at 0 (3 DN: the linear cumulants do not apply): the exact sum over the counts
+    below the hybrid sampler's switch (30 e-), the quadrature above. The Cornish-Fisher quantile
+    of a mean of 0 gave 486 DN, and its far nodes handed negative electrons to the curve (NaN)."""
+    lam = np.array([0.0, 0.5, 3.0, 12.0, 28.0, 40.0, 80.0])
+
+    def gamma(e):
+        return FW * (e / FW) ** 0.85
+
+    response = gamma if curve else None
+    k1, k2, _ = read_cumulants(lam, 0.0, offset, ReadModel(K, FW, SIGMA, 4095.0, True), response=response)
+    exact = np.array([_small_mean_moments(m, offset, response or (lambda e: e)) for m in lam])
+    assert np.allclose(k1, exact[:, 0], rtol=0, atol=2e-3)
+    assert np.allclose(k2, exact[:, 1], rtol=0, atol=2e-3)
+
+
 def test_clipped_normal_moments_against_quadrature():
     x = np.linspace(-30, 30, 600001)
     for mu, sd, lo, hi in [(3.0, 2.0, 0.0, 5.0), (-1.0, 0.5, 0.0, 10.0), (7.0, 3.0, -2.0, 8.0)]:

@@ -208,7 +208,9 @@ BAD = {
     "negative variance": (lambda r: [*r[:5], [1e-3, *r[5][1:3], -2.0], *r[6:]], HEADER, "cannot be negative"),
     "non-monotonic exposure": (lambda r: [*r[:5], [5e-4, *r[5][1:]], *r[6:]], HEADER, "non-monotonic"),
     "too few in the linear range": (lambda r: _rows(n=6), HEADER, "levels in the linear range"),
-    "no saturation": (lambda r: _rows(top=3000.0)[:28], HEADER, "no saturation reached"),
+    "QE above 1": (
+        lambda r: [[a, b / 10.0 if b else 0.0, c, d] for a, b, c, d in r], HEADER, "quantum efficiency"
+    ),
     # issue 32: accepted before, and fitted into nonsense
     "lit mean below the dark level": (lambda r: [*r[:3], [1e-3, r[3][1], 9.0, r[3][3]], *r[4:]], HEADER,
                                       "row 4: mean_dn = 9 below its dark level 10 DN"),

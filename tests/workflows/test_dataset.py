@@ -20,7 +20,6 @@ import bench_sim.workflows.dataset.reader as bds
 from bench_sim.config import DEFAULT_CONFIG_PATH, config_from_dict, config_sha256, with_overrides
 from bench_sim.errors import BenchSimError
 from bench_sim.workflows.dataset.run import run_dataset
-from bench_sim.workflows.dataset.targets import training_targets
 from tests.conftest import subpixel_shift
 
 #: a 12 x 48 sensor on the paper rig, 32 lines, stages 2 and 8 (fused)
@@ -227,6 +226,7 @@ def _fit_sync_error(stage1: np.ndarray, stage_m: np.ndarray, m: int) -> float:
     return float(grid[int(np.argmin([residual(e) for e in grid]))])
 
 
+@pytest.mark.physics
 def test_truth_holds_per_sample(tmp_path):
     """Noise off: ``dn`` is ``mean_dn`` rounded; ``reflectance`` is the drawn uniform reflectance,
     or, for random bars under the fill, carries the drawn sync error: from stage 1 to stage 80
@@ -293,11 +293,9 @@ def test_manifest_row_reproduces_its_sample(reference):
         rng = np.random.default_rng(np.random.SeedSequence(info["seed"], spawn_key=(i, 1)))
         again = run_pass(cfg, info["stages"], rng, truth=True).dataset
         (s,) = bds.iter_samples(ref, only=[i])
-        assert "gamma_hdr" in s.arrays and "hdr" not in s.arrays
-        extra = training_targets(again, cfg)  # the dataset's training targets (issue 24)
-        for name, arr in s.arrays.items():
-            made = extra[name] if name in extra else again[name].values
-            assert np.array_equal(made.astype(arr.dtype), arr), (i, name)  # truth stored as float32
+        assert "gamma_hdr" in s.arrays and "true_hdr_dn" in s.arrays and "hdr" not in s.arrays
+        for name, arr in s.arrays.items():  # the pass's variables, the truth stored as float32
+            assert np.array_equal(again[name].values.astype(arr.dtype), arr), (i, name)
 
 
 # --- must show 5: bad specs are one line, exit 2, nothing written -------------------------------

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import bench_sim
-from bench_sim.config import config_from_dict
+from bench_sim.config import config_from_dict, config_to_toml_dict
 from bench_sim.errors import BenchSimError
-from bench_sim.pipeline import PASS_VARIABLES, stage_pixel_bytes
+from bench_sim.pipeline import PASS_VARIABLES, stage_pixel_bytes, stored_dataset
 from bench_sim.sensor import stage_mean_var_dn
 from bench_sim.sensor.model import stage_offset_dn
 from bench_sim.workflows.dataset.reader import FUSED_VARIABLES, STAGE_VARIABLES
@@ -38,6 +38,7 @@ def _overrides(**sections):
 # --- must show 1: dn equals mean_dn without noise, with and without sync error -------------------
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("sync_error", [0.0, 0.05])
 @pytest.mark.parametrize("sensor_switches", [NOISE_OFF, TEMPORAL_OFF], ids=["all-off", "fixed-patterns-on"])
 def test_dn_is_mean_dn_without_noise(sync_error, sensor_switches):
@@ -62,6 +63,7 @@ def test_dn_is_mean_dn_without_noise(sync_error, sensor_switches):
 # --- must show 2: the temporal variance of dn - mean_dn per stage ---------------------------------
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("lit", [True, False], ids=["uniform-fill", "dark"])
 def test_temporal_variance_grows_as_closed_form(lit):
     lights = FILL_ONLY if lit else {"strong": {"enabled": False}, "weak": {"enabled": False}}
@@ -96,6 +98,7 @@ def test_temporal_variance_grows_as_closed_form(lit):
 # --- must show 3: under sync error, truth follows the stage ------------------------------------
 
 
+@pytest.mark.physics
 def test_sync_error_edges_of_dn_and_reflectance_coincide():
     ov = _overrides(
         lines=120,
@@ -140,7 +143,7 @@ def test_dataset_variables_units_and_provenance():
     cfg = config_from_dict(tomllib.loads(ds.attrs["config"]))
     assert cfg == config_from_dict(_overrides())
     assert ds.attrs["config_sha256"] == hashlib.sha256(
-        __import__("json").dumps(cfg.model_dump(mode="json", exclude_none=True), sort_keys=True).encode()
+        __import__("json").dumps(config_to_toml_dict(cfg), sort_keys=True).encode()
     ).hexdigest()
     assert (ds.attrs["seed"], ds.attrs["version"]) == (5, bench_sim.__version__)
     assert ds.attrs["engine"] == "fast" and ds.attrs["variant"]
@@ -152,14 +155,15 @@ def test_dataset_variables_units_and_provenance():
     for v in PASS_VARIABLES:
         assert ds[v.name].dims == v.dims and ds[v.name].dtype == v.array_dtype(ds.attrs["beta_bits"]), v
         assert (ds[v.name].attrs["units"], ds[v.name].attrs["long_name"]) == (v.units, v.doc), v
-    stored = {**STAGE_VARIABLES, **FUSED_VARIABLES}  # the data set: the pass's, truth in float32, ...
-    narrow = {v.name: "float32" if v.stored_dtype == "float64" else v.stored_dtype for v in PASS_VARIABLES
-              if not v.map}  # simulate's truth maps (gamma_hdr_error, tdi_light_ratio) are not stored
-    assert narrow.items() <= stored.items()  # ... then its training targets (issue 24)
+    # the data set stores every variable of the pass (simulate's schema, issue 34)
+    assert (*STAGE_VARIABLES, *FUSED_VARIABLES) == tuple(v.name for v in PASS_VARIABLES)
+    stored = {v.name: v.stored_dtype(12).name for v in PASS_VARIABLES}
+    assert stored["dn"] == "uint16" and stored["mean_dn"] == "float32" and stored["clipped"] == "bool"
     assert stage_pixel_bytes(12, truth=False) == ds.dn.dtype.itemsize == 2
     per_pixel = sum(ds[v].dtype.itemsize for v in ds.data_vars if "stage" in ds[v].dims)
     assert stage_pixel_bytes(12, truth=True) == per_pixel
-    assert stage_pixel_bytes(None, truth=True) == 4 + 8 + 8 + 8 + 4 + 1  # dn, mean_dn, linear_dn, ...
+    assert stage_pixel_bytes(None, truth=True) == 4 + 8 + 8 + 8 + 8 + 4 + 1  # dn, mean_dn, linear_dn, ...
+    assert stage_pixel_bytes(12, truth=True, stored=True) == 2 + 4 + 4 + 4 + 4 + 4 + 1  # in the files
 
 
 def test_same_seed_same_data_and_no_hdr_without_both_stages():
@@ -245,6 +249,7 @@ def test_truth_stages_outside_the_pass_refused(some, problem):
 # --- must show 4: an image target round-trips ----------------------------------------------------
 
 
+@pytest.mark.physics
 def test_image_target_round_trips(tmp_path):
     """Under the fill alone, ``reflectance`` is the image resampled to the pixel grid and
     ``mean_dn`` is proportional to it (fixed patterns off; the field is narrow: cos^4 ~ 1)."""
@@ -318,12 +323,13 @@ def test_cli_writes_each_format(tmp_path, fmt):
     )
     assert res.exit_code == 0, res.output
     ref = bench_sim.simulate(_tiny_toml(tmp_path), stages=[2, 8], seed=4)
+    stored = stored_dataset(ref, 12)  # the files' schema: the truth in float32 (issue 34)
     if fmt == "zarr":
         ds = xr.open_zarr(out / "simulation.zarr").load()
-        assert ds.identical(ref)
+        assert ds.identical(stored) and ds.mean_dn.dtype == np.float32
     elif fmt == "netcdf":
         ds = xr.open_dataset(out / "simulation.nc").load()
-        assert ds.identical(ref)
+        assert ds.identical(stored)
     else:
         meta = json.loads((out / "meta.json").read_text())
         assert meta["seed"] == 4 and meta["version"] == bench_sim.__version__ and meta["config_sha256"]

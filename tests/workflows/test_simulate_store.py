@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 import bench_sim
-from bench_sim import pipeline
 from bench_sim.config import load_config, with_overrides
-from bench_sim.pipeline import run_pass
+from bench_sim.pipeline import one_pass, run_pass
 from bench_sim.workflows import simulate_store
 from bench_sim.workflows.simulate import run_simulate, write_simulation
 from tests.conftest import TINY
@@ -43,9 +42,9 @@ def test_the_sink_holds_only_the_rows_in_flight(tmp_path, monkeypatch):
     progress and a chunk of frames (16); the lines written are the pass's."""
     import zarr
 
-    small_chunks = lambda shape, dt: (*(1,) * (len(shape) - 2), 8, 48)  # noqa: E731
-    monkeypatch.setattr(simulate_store, "zarr_auto_chunks", small_chunks)
-    monkeypatch.setattr(pipeline, "TRUTH_BAND_LINES", 16)
+    small_chunks = lambda dims, shape: (*(1,) * (len(shape) - 2), 8, 48)  # noqa: E731
+    monkeypatch.setattr(simulate_store, "store_chunks", small_chunks)
+    monkeypatch.setattr(one_pass, "TRUTH_BAND_LINES", 16)
     cfg = with_overrides(load_config(), {**TINY, "lines": 160})
     most = {}
 

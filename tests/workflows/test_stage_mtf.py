@@ -9,9 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench_sim.config import with_overrides
 from bench_sim.io import read_png_text
+from bench_sim.workflows.reproduce.result import SharpnessResult
+from bench_sim.workflows.reproduce.sharpness_report import sharpness_section
 from bench_sim.workflows.reproduce.stage_mtf import (
     COMPANION_LINES,
+    COMPANION_TEXELS_PER_PIXEL,
     companion_config,
     measure_stage_mtf,
     write_stage_mtf,
@@ -30,9 +34,11 @@ def test_companion_pass_keeps_the_bench_and_swaps_the_target() -> None:
     comp = companion_config(cfg)
     assert comp.target.layout == "slanted_edges" and cfg.target.layout == "paper"
     assert comp.lines == COMPANION_LINES and comp.sensor.columns == 128
+    patterns = {"columns": 0, "prnu_enabled": False, "dsnu_enabled": False, "column_fpn": False}
     for section in ("sensor", "timing", "dtdi", "lens", "drum", "lights", "fusion"):
         a, b = getattr(comp, section).model_dump(), getattr(cfg, section).model_dump()
-        assert a == b or section == "sensor" and {**a, "columns": 0} == {**b, "columns": 0}, section
+        assert a == b or section == "sensor" and {**a, **patterns} == {**b, **patterns}, section
+    assert not (comp.sensor.prnu_enabled or comp.sensor.dsnu_enabled or comp.sensor.column_fpn)
 
 
 @pytest.mark.physics
@@ -52,3 +58,45 @@ def test_mtf50_vs_stage_files(tmp_path: Path) -> None:
     np.testing.assert_allclose(across, np.median(across), rtol=0.06)
     assert float(rows[-1]["mtf50_along_cyc_px"]) == pytest.approx(along[3], rel=0.03)  # HDR from stage 16
     assert read_png_text(tmp_path / "mtf50_vs_stage.png")["seed"] == 3
+    assert "noise-free" in read_png_text(tmp_path / "mtf50_vs_stage.png")["noise"]
+
+
+@pytest.mark.physics
+def test_mtf50_vs_stage_is_noise_free() -> None:
+    """No noise makes a trend: without a sync error nothing changes with the stage but the noise,
+    and the companion's MTF50s are the same at every stage to 1e-5 (the expected words of a
+    sensor without fixed patterns; a noisy pass scatters them by per cents)."""
+    cfg = with_overrides(_bench(), {"timing": {"sync_error": 0.0}})
+    ds = measure_stage_mtf(cfg, seed=3)
+    for d in ("along", "across"):
+        v = ds[f"mtf50_{d}"].values
+        np.testing.assert_allclose(v, v[0], rtol=1e-5, err_msg=d)
+    assert np.array_equal(ds["dn"].values, ds["mean_dn"].values)
+
+
+def test_companion_draws_finer_edges_through_a_lens() -> None:
+    """Through a lens that blurs (diffraction, the default) the companion's target has 8 texels per
+    pixel; a perfect lens keeps the bench's (the numbers of bench_sim 0.3)."""
+    assert companion_config(_bench()).target.texels_per_pixel == COMPANION_TEXELS_PER_PIXEL == 8
+    perfect = make_cfg(lens={"diffraction": False})
+    assert companion_config(perfect).target.texels_per_pixel == perfect.target.texels_per_pixel == 4
+
+
+def _sharpness(measured: float | None, warning: str | None = None) -> SharpnessResult:
+    return SharpnessResult(
+        lens="diffraction: N_w = 4.444 at 550 nm", sharpness_stages=[1, 10], mtf50_across_cyc_px=0.45,
+        mtf50_along_cyc_px=0.36, mtf_nyquist_across=measured, mtf_nyquist_along=0.28,
+        closed_nyquist_across=0.458, closed_nyquist_across_binned=0.447, closed_mtf50_across_cyc_px=0.467,
+        nyquist_warning=warning,
+    )
+
+
+def test_sharpness_section_says_what_was_measured() -> None:
+    """The report's sharpness section: the measurement matches the closed form only within 3 %,
+    the deviation signed; the Nyquist warning when there is one."""
+    close = "\n".join(sharpness_section(_sharpness(0.440)))
+    assert "which the measurement matches (-1.6 %)" in close and "Warning" not in close
+    assert "| SFR at Nyquist (0.5 cycles/px) | 0.440 | 0.280 |" in close
+    far = "\n".join(sharpness_section(_sharpness(0.480, "the system MTF50 ... above Nyquist")))
+    assert "from which the measurement differs (+7.4 %)" in far and "**Warning:** the system MTF50" in far
+    assert "could not measure" in "\n".join(sharpness_section(_sharpness(None)))

@@ -24,6 +24,7 @@ from bench_sim.workflows.dataset.reader import (
     DATA_STORE,
     DATASET_JSON,
     MANIFEST_CSV,
+    MANIFEST_META,
     MANIFEST_PARQUET,
     RECORDS_DIR,
     THUMBNAILS,
@@ -147,6 +148,11 @@ def _randomized_rows(spec: DatasetSpec, df: pd.DataFrame) -> list[list[Any]]:
             if key == "target.image":
                 drawn += " (samples with layout image)"
         rows.append([f"`{key}`", described.replace("|", "/"), drawn.replace("|", "/")])
+    for key, sv in spec.scene.items():  # where the windows sit, the light levels (dataset.sample_scene)
+        col = done[f"scene.{key}"] if len(done) else df[f"scene.{key}"].iloc[:0]
+        drawn = (f"{_fmt(col.min())} .. {_fmt(col.median())} .. {_fmt(col.max())} (min .. median .. max)"
+                 if len(col) else "-")
+        rows.append([f"`scene.{key}`", sv.describe(), drawn])
     return rows
 
 
@@ -191,9 +197,12 @@ def _contents(schema: dict[str, Any]) -> list[str]:
     ]
     md = markdown_table(["variable", "dimensions", "type", "units", "meaning"], var_rows, fmt=_fmt) + [""]
     md += markdown_table(["file", "what"], [
-        [f"`{DATA_STORE}`", "the arrays (Zarr v3): one chunk per sample and stage, `units` on every array"],
-        [f"`{MANIFEST_PARQUET}`, `{MANIFEST_CSV}`", "one row per sample: `sample`, `seed`, the randomised "
-         "values, `config_sha256`, summary metrics, `status`, `error`, `wall_s`, `worker`"],
+        [f"`{DATA_STORE}`", "the arrays (Zarr v3, `simulate`'s schema with a `sample` dimension): one chunk "
+         "per sample and stage, `units` on every array, each sample's physical coordinates"],
+        [f"`{MANIFEST_PARQUET}`, `{MANIFEST_CSV}`", "one row per sample: `sample`, `seed`, `split`, the "
+         "randomised and scene values, `config_sha256`, summary metrics, `status`, `error`, `wall_s`, "
+         "`worker`; the CSV is plain (`pandas.read_csv` reads it as it is), its provenance in "
+         f"`{MANIFEST_META}`"],
         [f"`{DATASET_JSON}`", "the spec, provenance (version, resolved base bench and its SHA-256), streams, "
          "schema"],
         [f"`{RECORDS_DIR}/NNNNNNNN.json`",
@@ -202,10 +211,15 @@ def _contents(schema: dict[str, Any]) -> list[str]:
         [f"`{COMPLETION_RECORD}`", "written last, when every sample is complete"],
     ], fmt=_fmt) + [""]
     md += [
-        "Truth: `mean_dn` is the exact expectation of `dn` before the word clips (fixed patterns in), "
-        "`photons` the mean photons the stage pixel collected, `reflectance` the target reflectance "
-        "its footprints integrated (exact under the sample's sync error), `clipped` marks reads or "
-        "words that clipped. Summary metrics per sample: `scene_dr_db` = 20 lg of the 99.9th over "
+        "Truth: `mean_dn` is the exact expectation of `dn` with every clip (full well, ADC, word) and the "
+        "fixed patterns in, `linear_dn` the same without any clip, `noise_std_dn` the temporal standard "
+        "deviation of `dn`, `photons` the mean photons the stage pixel collected, `reflectance` the "
+        "target reflectance its footprints integrated (exact under the sample's sync error), `clipped` "
+        "marks reads or words that clipped in this draw. The training target of an HDR fusion is "
+        "`true_hdr_dn`, the noise-free stage-mu2 signal without any clip (`linear_dn` of stage mu2 less "
+        "its offsets); `eq11_expected_dn` is eq. 11 of the expected words (what eq. 11 gives without "
+        "noise, not the truth); `hdr_recoverable` marks the pixels some stage can give. "
+        "Summary metrics per sample: `scene_dr_db` = 20 lg of the 99.9th over "
         "the 0.1th percentile of `photons`; per stage m, `saturated_fraction_m{m}` and "
         "`snr_dark_m{m}` / `snr_bright_m{m}` = mean signal above the dark level over the rms of "
         "`dn - mean_dn` in the darkest / brightest tenth of the scene (clipped pixels left out).",
@@ -221,6 +235,8 @@ def _how_made(spec: DatasetSpec, info: dict[str, Any], df: pd.DataFrame, cmd: st
         f"```sh\n{cmd}\n```", "",
         f"Root seed {spec.seed}. {info['streams']}. A sample's content depends only on (spec, seed, i): "
         "any number of workers, `--resume` and `--only i` give it bit for bit.", "",
+        "Splits (samples): " + ", ".join(f"{k} {v}" for k, v in info["split_samples"].items())
+        + f" ({info['split_rule']}).", "",
         f"Base bench SHA-256 `{info['base']['config_sha256']}`; spec SHA-256 `{info['spec_sha256']}`"
         + (f"; image files: {', '.join(f'`{k}`' for k in spec.images)}" if spec.images else "") + ".", "",
         f"The spec (`{info['spec_file']}`):", "",
@@ -236,7 +252,8 @@ def _how_made(spec: DatasetSpec, info: dict[str, Any], df: pd.DataFrame, cmd: st
 def _metrics(spec: DatasetSpec, df: pd.DataFrame) -> list[str]:
     """The summary metrics over the complete samples and, for small datasets, each sample."""
     md: list[str] = []
-    metric_cols = [c for c in df.columns if c == "scene_dr_db" or c.startswith(("saturated_", "snr_"))]
+    metric_cols = [c for c in df.columns if c in ("scene_dr_db", "light_scale", "recoverable_fraction")
+                   or c.startswith(("saturated_", "snr_", "light_ratio_"))]
     done = df[df.status == "complete"]
     if len(done):
         md += ["### Summary metrics", ""]
@@ -244,7 +261,10 @@ def _metrics(spec: DatasetSpec, df: pd.DataFrame) -> list[str]:
             [f"`{c}`", int(done[c].notna().sum()), done[c].min(), done[c].median(), done[c].max()]
             for c in metric_cols
         ], fmt=_fmt)
-        md += ["", "A metric has no value (`nan`) where its region clipped entirely at that stage.", ""]
+        md += ["", "A metric has no value (`nan`) where its region clipped entirely at that stage. "
+               "`light_ratio_*`: the TDI window's light ratio r (`tdi_light_ratio`; eq. 11 assumes r = 1): "
+               "its 1st and 99th percentiles, largest |r - 1| and the fraction of pixels with |r - 1| > 5 %.",
+               ""]
     if len(done) and spec.samples <= LISTED_SAMPLES:
         keys = list(spec.randomize)
         head = ["sample", *[f"`{k}`" for k in keys], "scene_dr_db",
@@ -267,12 +287,16 @@ HOW_TO_LOAD = [
     "import bench_sim",
     "ds = bench_sim.dataset.open(DIR)      # xarray.Dataset, lazy; manifest columns as coordinates",
     'ds.dn.sel(stage=80).isel(sample=0)     # one stage image; ds["lights.strong.irradiance_w_m2"] ...',
+    "from bench_sim.dataset import iter_batches, score_fusion",
+    'for batch in iter_batches(DIR, split="train", fields=["dn", "true_hdr_dn"], batch_size=8):',
+    "    ...                                 # numpy arrays; the target: true_hdr_dn",
+    'score_fusion(DIR, "gamma_hdr", split="test").regions   # any fusion against the true target',
     "for s in bench_sim.dataset.iter_samples(DIR):   # numpy only, one sample at a time",
     '    s.arrays["dn"], s.arrays["mean_dn"], s.values, s.metrics',
     "```", "",
     "Or with the libraries themselves: `xarray.open_zarr(DIR + '/data.zarr')` (keep the samples "
     "whose record is complete), `pandas.read_parquet(DIR + '/manifest.parquet')`, "
-    "`pandas.read_csv(DIR + '/manifest.csv', comment='#')`.", "",
+    "`pandas.read_csv(DIR + '/manifest.csv')`.", "",
 ]
 
 

@@ -47,7 +47,8 @@ def split_samples(folder: str | Path, split: str | None = None, *, incomplete: b
         return done
     if split not in splits:
         raise BenchSimError(f"split = {split!r}: not a split of {str(folder)!r} ({', '.join(splits)})")
-    return split_indices(int(info["seed"]), done, splits)[split]
+    chosen = set(split_indices(int(info["seed"]), n, splits)[split])
+    return [i for i in done if i in chosen]
 
 
 class SplitSamples:

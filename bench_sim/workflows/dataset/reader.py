@@ -11,17 +11,19 @@
 Layout of ``DIR`` (the writer is :mod:`bench_sim.workflows.dataset.run`):
 
 =========================== =====================================================================
-``data.zarr``               Zarr v3: ``dn``, ``mean_dn``, ``photons``, ``reflectance``,
-                            ``clipped``, ``noise_std_dn`` (``sample, stage, line, column``),
-                            ``gamma_hdr``, ``gamma_hdr_source``, ``gamma_hdr_truth``
-                            (``sample, line, column``) when two stages are fused; truth in
-                            float32; one chunk per sample and stage; ``units``, ``long_name``,
-                            ``pedestal_included`` on every array; physical coordinates
-                            (:mod:`bench_sim.workflows.dataset.coordinates`)
+``data.zarr``               Zarr v3, the schema of ``simulate``'s store with a ``sample``
+                            dimension (:mod:`bench_sim.pipeline.store_schema`): the pass's
+                            stage variables (``sample, stage, line, column``) and, when two
+                            stages are fused, its image variables (``sample, line, column``):
+                            ``gamma_hdr``, the true HDR target ``true_hdr_dn``, ...; words in
+                            the smallest unsigned type, truth in float32; ``units``,
+                            ``long_name``, ``pedestal_included`` on every array; physical
+                            coordinates per sample (:data:`SAMPLE_COORDS`)
 ``samples/NNNNNNNN.json``   one record per finished sample, written after its arrays are on
                             disk: status (``complete`` / ``failed``), values, metrics, time
                             (the journal of :mod:`bench_sim.runtime.journal`)
-``manifest.parquet``/``.csv`` one row per sample (complete, failed or pending)
+``manifest.parquet``/``.csv`` one row per sample (complete, failed or pending); plain CSV,
+                            its provenance in ``manifest.csv.json``
 ``dataset.json``            the spec, provenance (version, config hashes), the schema
 ``README.md``               the dataset card; ``thumbnails.png`` its thumbnail sheet
 ``.bench-sim-output.json``  the completion record, written last, when every sample is complete
@@ -47,8 +49,7 @@ from bench_sim.errors import BenchSimError
 from bench_sim.io import OUTPUT_MARKER
 from bench_sim.pipeline import IMAGE_DIMS, STAGE_DIMS, VARIABLES_BY_NAME, pass_variables
 from bench_sim.runtime.journal import Journal
-from bench_sim.workflows.dataset.splits import DEFAULT_SPLITS, split_of
-from bench_sim.workflows.dataset.targets import EXTRA_FUSED_VARIABLES, EXTRA_STAGE_VARIABLES
+from bench_sim.workflows.dataset.splits import DEFAULT_SPLITS, split_map
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -63,6 +64,7 @@ __all__ = [
     "RECORDS_DIR",
     "MANIFEST_PARQUET",
     "MANIFEST_CSV",
+    "MANIFEST_META",
     "CARD",
     "THUMBNAILS",
     "COMPLETION_RECORD",
@@ -70,6 +72,7 @@ __all__ = [
     "DATASET_FILES",
     "STAGE_VARIABLES",
     "FUSED_VARIABLES",
+    "SAMPLE_COORDS",
     "variable_meta",
     "journal",
     "record_path",
@@ -84,6 +87,8 @@ DATASET_JSON = "dataset.json"
 RECORDS_DIR = "samples"
 MANIFEST_PARQUET = "manifest.parquet"
 MANIFEST_CSV = "manifest.csv"
+#: the manifest's sidecar: its provenance and columns
+MANIFEST_META = "manifest.csv.json"
 CARD = "README.md"
 THUMBNAILS = "thumbnails.png"
 #: written last, when every sample is complete (the output-set marker of :mod:`bench_sim.io`)
@@ -94,36 +99,23 @@ DATASET_KIND = "bench_sim dataset"
 #: holding anything else is never replaced or written into
 DATASET_FILES = (
     DATASET_JSON, f"{DATA_STORE}/**", f"{RECORDS_DIR}/[0-9]*.json", MANIFEST_PARQUET, MANIFEST_CSV,
-    f"{MANIFEST_CSV}.json", CARD, THUMBNAILS,
+    MANIFEST_META, CARD, THUMBNAILS,
 )
 
 
 
-def _stored(dtype: str) -> str:
-    """The dataset's dtype of a pass variable: the truth in float32 (half the bytes; its
-    relative precision 6e-8 is far below any noise it is compared with)."""
-    return "float32" if dtype == "float64" else dtype
-
-
-#: variables with dimensions (sample, stage, line, column) -> dtype (from
-#: :data:`bench_sim.pipeline.PASS_VARIABLES`, float64 stored as float32, and the training
-#: targets of :mod:`bench_sim.workflows.dataset.targets`, as are those below)
-STAGE_VARIABLES: dict[str, str] = {
-    **{v.name: _stored(v.stored_dtype) for v in pass_variables(STAGE_DIMS)},
-    **{name: meta[0] for name, meta in EXTRA_STAGE_VARIABLES.items()},
-}
-#: variables with dimensions (sample, line, column), present when two stages are fused -> dtype
-FUSED_VARIABLES: dict[str, str] = {
-    **{v.name: _stored(v.stored_dtype) for v in pass_variables(IMAGE_DIMS)},
-    **{name: meta[0] for name, meta in EXTRA_FUSED_VARIABLES.items()},
-}
+#: variables with dimensions (sample, stage, line, column): the pass's stage variables
+#: (:data:`bench_sim.pipeline.PASS_VARIABLES`)
+STAGE_VARIABLES: tuple[str, ...] = tuple(v.name for v in pass_variables(STAGE_DIMS))
+#: variables with dimensions (sample, line, column), present when two stages are fused: the pass's
+#: image variables, its maps included (the same variables as ``simulate``'s)
+FUSED_VARIABLES: tuple[str, ...] = tuple(v.name for v in pass_variables(IMAGE_DIMS, maps=True))
+#: coordinates of their own per sample (where its window sits, its line period)
+SAMPLE_COORDS: dict[str, str] = {"along_track_mm": "line", "time_s": "line", "across_track_mm": "column"}
 
 
 def variable_meta(name: str) -> tuple[str, str]:
     """(units, long name) of a dataset variable."""
-    extra = {**EXTRA_STAGE_VARIABLES, **EXTRA_FUSED_VARIABLES}
-    if name in extra:
-        return extra[name][1], extra[name][2]
     return VARIABLES_BY_NAME[name].units, VARIABLES_BY_NAME[name].doc
 
 
@@ -220,7 +212,8 @@ def open(folder: str | Path, *, incomplete: bool = False) -> xr.Dataset:
     for key in dict.fromkeys(k for row in table for k in row):
         ds.coords[key] = ("sample", np.asarray([row.get(key) for row in table]))
     splits = info.get("splits") or DEFAULT_SPLITS
-    ds.coords["split"] = ("sample", np.asarray([split_of(int(info["seed"]), i, splits) for i in done]))
+    of = split_map(int(info["seed"]), int(info["samples"]), splits)
+    ds.coords["split"] = ("sample", np.asarray([of[i] for i in done]))
     return ds
 
 

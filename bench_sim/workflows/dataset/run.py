@@ -48,8 +48,9 @@ from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import check_free_space, format_bytes, write_json
 from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries
+from bench_sim.metrics.fusion_truth import LIGHT_RATIO_TOLERANCE
 from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
-from bench_sim.pipeline import run_pass
+from bench_sim.pipeline import physical_coords, run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
 from bench_sim.runtime.execution import Shared, TaskOutcome, open_client, run_tasks
@@ -64,8 +65,9 @@ from bench_sim.workflows.dataset.reader import (
     journal,
     read_records,
 )
+from bench_sim.workflows.dataset.sample_scene import SampleScene, peak_signal_fraction, scale_lights
 from bench_sim.workflows.dataset.spec import DatasetSpec, check_sample_configs, load_spec, sample_streams
-from bench_sim.workflows.dataset.splits import split_of
+from bench_sim.workflows.dataset.splits import split_map
 from bench_sim.workflows.dataset.store import (
     bytes_per_sample,
     check_folder,
@@ -75,7 +77,7 @@ from bench_sim.workflows.dataset.store import (
     manifest_meta,
     write_manifest,
 )
-from bench_sim.workflows.dataset.targets import fixed_camera, recorded_values, strict_json, training_targets
+from bench_sim.workflows.dataset.targets import fixed_camera, recorded_values, strict_json
 from bench_sim.workflows.preflight import preflight_tasks
 
 if TYPE_CHECKING:
@@ -107,6 +109,7 @@ class SampleTask:
     stages: tuple[int, ...]
     stream: np.random.SeedSequence
     camera_seed: int | None = None  # camera = "fixed": the dataset's root seed (targets.fixed_camera)
+    scene: dict[str, float] = field(default_factory=dict)  # its [scene] values (dataset.sample_scene)
 
 
 @dataclass
@@ -118,12 +121,13 @@ class SampleOutput:
     arrays
         Variable -> array: ``(stage, line, column)`` for
         :data:`~bench_sim.workflows.dataset.reader.STAGE_VARIABLES`, ``(line, column)`` for
-        :data:`~bench_sim.workflows.dataset.reader.FUSED_VARIABLES`.
+        :data:`~bench_sim.workflows.dataset.reader.FUSED_VARIABLES`, and the sample's own
+        coordinates (:data:`~bench_sim.workflows.dataset.reader.SAMPLE_COORDS`).
     metrics
         :func:`sample_metrics`.
     info
-        ``config_sha256``, ``engine``, ``variant``, ``t_int_s``, ``frames`` and the pass's
-        timings per step [s].
+        ``config_sha256``, ``engine``, ``variant``, ``t_int_s``, ``frames``, the pass's
+        timings per step [s] and, with a ``[scene]``, ``scene`` (its values and light scale).
     """
 
     index: int
@@ -139,7 +143,11 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
     the lowest stored stage) and, per stored stage ``m``: ``saturated_fraction_m{m}``,
     ``snr_dark_m{m}`` and ``snr_bright_m{m}`` (:func:`~bench_sim.metrics.truth.truth_snr` over the
     darkest and brightest tenth of the scene, clipped pixels left out, above the stage's dark
-    level :func:`~bench_sim.sensor.model.stage_mean_var_dn` at 0 photons).
+    level :func:`~bench_sim.sensor.model.stage_mean_var_dn` at 0 photons); when fused, the TDI
+    window's light ratio ``r`` (``tdi_light_ratio``): ``light_ratio_p01``, ``light_ratio_p99``,
+    ``light_ratio_max_dev`` (largest ``|r - 1|``), ``light_ratio_outside_fraction`` (pixels with
+    ``|r - 1|`` above :data:`~bench_sim.metrics.fusion_truth.LIGHT_RATIO_TOLERANCE`: 0 where eq. 11's
+    assumption holds everywhere), and ``recoverable_fraction`` (``hdr_recoverable``).
     """
     photons0 = np.asarray(ds.photons.values[0])
     dark, bright = region_masks(photons0)
@@ -153,6 +161,17 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
         out[f"saturated_fraction_m{m}"] = saturated_fraction(clipped)
         out[f"snr_dark_m{m}"] = truth_snr(dn, mean, dark_level, dark & ~clipped)
         out[f"snr_bright_m{m}"] = truth_snr(dn, mean, dark_level, bright & ~clipped)
+    if "tdi_light_ratio" in ds:
+        r = np.asarray(ds.tdi_light_ratio.values, dtype=np.float64)
+        r = r[np.isfinite(r)]
+        dev = np.abs(r - 1.0)
+        p01, p99 = np.percentile(r, [1.0, 99.0]) if r.size else (np.nan, np.nan)
+        out.update(
+            light_ratio_p01=float(p01), light_ratio_p99=float(p99),
+            light_ratio_max_dev=float(dev.max()) if r.size else float("nan"),
+            light_ratio_outside_fraction=float(np.mean(dev > LIGHT_RATIO_TOLERANCE)) if r.size else 0.0,
+            recoverable_fraction=float(np.mean(ds.hdr_recoverable.values)),
+        )
     return out
 
 
@@ -171,21 +190,32 @@ def make_sample(task: SampleTask, records: LightRecords | None = None) -> Sample
 
     ``records``: the light records of its scene made by another task (:func:`sample_inputs`),
     put in this process's cache for the pass; without them the pass finds them in the cache or
-    renders them."""
+    renders them. With ``scene.peak_of_mu2_clip`` the lights are scaled first
+    (:func:`~bench_sim.workflows.dataset.sample_scene.peak_signal_fraction`)."""
     if records is not None:
         install_records(records)
-    camera = None if task.camera_seed is None else fixed_camera(task.config, task.camera_seed)
-    res = run_pass(task.config, task.stages, np.random.default_rng(task.stream), truth=True,
-                   fixed_pattern=camera)
+    cfg, scale = task.config, 1.0
+    peak = task.scene.get("peak_of_mu2_clip")
+    if peak is not None:
+        now = peak_signal_fraction(cfg, task.stages, task.stream)
+        if not now > 0:
+            raise BenchSimError(f"scene.peak_of_mu2_clip: sample {task.index} sees no light to scale")
+        scale = float(peak) / now
+        cfg = scale_lights(cfg, scale)
+    camera = None if task.camera_seed is None else fixed_camera(cfg, task.camera_seed)
+    res = run_pass(cfg, task.stages, np.random.default_rng(task.stream), truth=True, fixed_pattern=camera)
     ds = res.dataset
     arrays = {v: np.asarray(ds[v].values) for v in (*STAGE_VARIABLES, *FUSED_VARIABLES) if v in ds}
-    arrays.update(training_targets(ds, task.config))
-    info = {
-        "config_sha256": config_sha256(task.config),
+    across = task.scene.get("window_across_mm", 0.0) * 1e-3
+    arrays.update({k: values for k, (_d, values, _a) in physical_coords(cfg, across_m=across).items()})
+    info: dict[str, Any] = {
+        "config_sha256": config_sha256(cfg),
         **{k: ds.attrs[k] for k in ("engine", "variant", "t_int_s", "frames")},
         "timings_s": {k: round(float(v), 4) for k, v in res.timings_s.items()},
     }
-    return SampleOutput(task.index, arrays, sample_metrics(ds, task.config), info)
+    if task.scene:
+        info["scene"] = SampleScene(dict(task.scene), scale).as_record()
+    return SampleOutput(task.index, arrays, sample_metrics(ds, cfg), info)
 
 
 # --- the run -------------------------------------------------------------------------------------
@@ -286,7 +316,7 @@ def _plan(
     action = check_folder(spec, out, reuse=resume or only_idx is not None)
     done_before = set() if action == "create" else _own_complete(out, spec)
     todo = only_idx if only_idx is not None else [i for i in range(spec.samples) if i not in done_before]
-    per = bytes_per_sample(len(spec.stages), spec.base.lines, spec.base.sensor.columns, spec.fused)
+    per = bytes_per_sample(spec)
     check_free_space(
         out, estimate_bytes(spec, len(todo)),
         detail=f"{len(todo)} samples x {format_bytes(per)} uncompressed + records and card",
@@ -301,13 +331,18 @@ def _plan(
     return _Plan(spec, out, action, done_before, todo, values, planned)
 
 
+def _scene_values(values: dict[str, Any]) -> dict[str, float]:
+    """A sample's ``[scene]`` values from its drawn values (``scene.<key>``)."""
+    return {k.removeprefix("scene."): float(v) for k, v in values.items() if k.startswith("scene.")}
+
+
 def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool) -> _SampleWriter:
     """Make the samples to do, writing each as it completes; the manifest of what is on disk
     is written if the run stops (Ctrl-C, a lost scheduler)."""
     spec, todo = plan.spec, plan.todo
     camera_seed = spec.seed if spec.camera == "fixed" else None
-    tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1], camera_seed)
-             for i in todo]
+    tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1], camera_seed,
+                        _scene_values(plan.values[i])) for i in todo]
     skipped = spec.samples - len(todo)
     note = f"({skipped} already complete)" if skipped else ""
     with progress_bar("dataset", len(todo), "samples", enabled=progress, note=note) as bar:
@@ -416,6 +451,7 @@ class _SampleWriter:
         # a group of arrays, by name
         self.group: Any = zarr.open_group(str(out / DATA_STORE), mode="r+", use_consolidated=False)
         self.journal = journal(out)
+        self.splits = split_map(spec.seed, spec.samples, spec.splits)
         self.ran: list[int] = []
         self.failed: dict[int, str] = {}
         self._last_manifest = time.monotonic()
@@ -427,7 +463,7 @@ class _SampleWriter:
         rec: dict[str, Any] = {
             "sample": i, "seed": self.spec.seed,
             "values": self.values[i],
-            "split": split_of(self.spec.seed, i, self.spec.splits),
+            "split": self.splits[i],
             "spec_sha256": self.spec.identity(),  # --resume takes only this spec's and seed's records
             "wall_s": round(float(outcome.wall_s), 4), "worker": str(outcome.worker),
         }

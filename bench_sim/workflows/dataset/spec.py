@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -55,7 +54,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field
 
 from bench_sim.config import (
     DEFAULT_CONFIG_PATH,
@@ -71,6 +70,8 @@ from bench_sim.io import sha256_file
 from bench_sim.io.glob_walk import bounded_glob
 from bench_sim.runtime.execution import task_seed_sequence
 from bench_sim.sensor.dtdi import check_stages
+from bench_sim.workflows.dataset.distributions import DIST_MODELS, DISTRIBUTIONS, Distribution, Glob, Strict
+from bench_sim.workflows.dataset.sample_scene import SceneValue, draw_scene, parse_scene, place_window
 from bench_sim.workflows.dataset.splits import DEFAULT_SPLITS, check_splits
 from bench_sim.workflows.dataset.targets import check_camera
 from bench_sim.workflows.preflight import SeedField
@@ -87,179 +88,13 @@ __all__ = [
     "check_sample_configs",
 ]
 
-#: ``dist`` values of ``[randomize]`` entries and what they draw.
-DISTRIBUTIONS: dict[str, str] = {
-    "uniform": "uniform in [low, high)",
-    "loguniform": "exp(uniform in [ln low, ln high)), 0 < low < high",
-    "normal": "normal(mean, std) truncated to [low, high] (inverse CDF of one uniform draw)",
-    "choice": "one of values, uniformly or with weights",
-    "glob": "one of the sorted files matching pattern, uniformly (target.image only)",
-}
-
 #: Config keys that fix the arrays' shape or the fused pair: set by the spec, never randomised.
 SHAPE_KEYS = ("lines", "sensor.columns", "sensor.rows", "fusion.mu1", "fusion.mu2")
 
-#: Interior point at which continuous distributions are also checked (catches integer keys)
-_INTERIOR = 0.381966
-
-Scalar = bool | int | float | str
 #: Samples above which a spec is refused (the plan draws every sample's values up front)
 MAX_SAMPLES = 100_000
 
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-def _finite(**values: float) -> None:
-    for k, v in values.items():
-        if not math.isfinite(v):
-            raise ValueError(f"{k} = {v}: must be finite")
-
-
-class _Interval(_Strict):
-    """A distribution over ``[low, high)``: both finite, ``low < high``."""
-
-    low: float
-    high: float
-
-    @model_validator(mode="after")
-    def _order(self) -> _Interval:
-        _finite(low=self.low, high=self.high)
-        if not self.low < self.high:
-            raise ValueError(
-                f"low = {self.low} must be below high = {self.high} (a fixed value goes in [config])"
-            )
-        return self
-
-
-class Uniform(_Interval):
-    """Uniform in ``[low, high)``."""
-
-    dist: Literal["uniform"]
-
-    def draw(self, rng: np.random.Generator) -> float:
-        return float(rng.uniform(self.low, self.high))
-
-    def probes(self) -> list[Any]:
-        return [self.low, self.high, self.low + _INTERIOR * (self.high - self.low)]
-
-
-class LogUniform(_Interval):
-    """``exp`` of a uniform draw in ``[ln low, ln high)``: every decade equally likely."""
-
-    dist: Literal["loguniform"]
-    low: Annotated[float, Field(gt=0)]
-    high: Annotated[float, Field(gt=0)]
-
-    def draw(self, rng: np.random.Generator) -> float:
-        return float(np.exp(rng.uniform(np.log(self.low), np.log(self.high))))
-
-    def probes(self) -> list[Any]:
-        return [self.low, self.high, self.low * (self.high / self.low) ** _INTERIOR]
-
-
-class Normal(_Strict):
-    """Normal ``(mean, std)`` truncated to ``[low, high]``, drawn by the inverse CDF of one uniform:
-    ``x = mean + std * Phi^-1(Phi(a) + u (Phi(b) - Phi(a)))`` with ``a``, ``b`` the standardised
-    bounds (computed on the side of the mean where the bounds' tail is, so it stays accurate far
-    out in a tail)."""
-
-    dist: Literal["normal"]
-    mean: float
-    std: Annotated[float, Field(gt=0)]
-    low: float
-    high: float
-
-    @model_validator(mode="after")
-    def _order(self) -> Normal:
-        _finite(mean=self.mean, std=self.std, low=self.low, high=self.high)
-        if not self.low < self.high:
-            raise ValueError(f"low = {self.low} must be below high = {self.high}")
-        return self
-
-    def draw(self, rng: np.random.Generator) -> float:
-        from scipy.special import ndtr, ndtri
-
-        u = float(rng.uniform())
-        a, b = (self.low - self.mean) / self.std, (self.high - self.mean) / self.std
-        if a > 0:  # both bounds above the mean: mirror into the lower tail
-            z = -float(ndtri(ndtr(-b) + (1.0 - u) * (ndtr(-a) - ndtr(-b))))
-        else:
-            z = float(ndtri(ndtr(a) + u * (ndtr(b) - ndtr(a))))
-        return min(max(self.mean + self.std * z, self.low), self.high)
-
-    def probes(self) -> list[Any]:
-        return [self.low, self.high, min(max(self.mean, self.low), self.high)]
-
-
-class Choice(_Strict):
-    """One of ``values`` (numbers, strings or booleans of one kind), uniformly or with
-    ``weights`` (non-negative, not all zero)."""
-
-    dist: Literal["choice"]
-    values: list[Scalar]
-    weights: list[Annotated[float, Field(ge=0)]] | None = None
-
-    @model_validator(mode="after")
-    def _values(self) -> Choice:
-        if not self.values:
-            raise ValueError("values = []: a choice needs at least one value")
-        kinds = {_kind(v) for v in self.values}
-        if len(kinds) > 1:
-            raise ValueError(f"values = {self.values}: mixes {' and '.join(sorted(kinds))} (one kind only)")
-        if self.weights is not None:
-            if len(self.weights) != len(self.values):
-                raise ValueError(
-                    f"weights = {self.weights}: {len(self.weights)} weights for {len(self.values)} values"
-                )
-            if not all(math.isfinite(w) for w in self.weights) or sum(self.weights) <= 0:
-                raise ValueError(f"weights = {self.weights}: must be finite and not all zero")
-        return self
-
-    def draw(self, rng: np.random.Generator) -> Any:
-        n = len(self.values)
-        if self.weights is None:
-            return self.values[int(rng.integers(n))]
-        p = np.asarray(self.weights, dtype=np.float64)
-        return self.values[int(rng.choice(n, p=p / p.sum()))]
-
-    def probes(self) -> list[Any]:
-        return list(self.values)
-
-
-class Glob(_Strict):
-    """One of the files matching ``pattern`` (relative to the spec), sorted, uniformly.
-
-    ``files`` holds the matches as written relative to the spec folder (filled by
-    :func:`load_spec`)."""
-
-    dist: Literal["glob"]
-    pattern: Annotated[str, Field(min_length=1)]
-    files: tuple[str, ...] = ()
-
-    def draw(self, rng: np.random.Generator) -> str:
-        return self.files[int(rng.integers(len(self.files)))]
-
-    def probes(self) -> list[Any]:
-        return list(self.files)
-
-
-Distribution = Uniform | LogUniform | Normal | Choice | Glob
-_DIST_MODELS: dict[str, type[BaseModel]] = {
-    "uniform": Uniform, "loguniform": LogUniform, "normal": Normal, "choice": Choice, "glob": Glob,
-}
-
-
-def _kind(v: Any) -> str:
-    if isinstance(v, bool):
-        return "booleans"
-    if isinstance(v, int | float):
-        return "numbers"
-    return "strings"
-
-
-class _SpecFile(_Strict):
+class _SpecFile(Strict):
     """The top level of a spec file (unknown keys refused)."""
 
     name: str | None = None
@@ -274,6 +109,7 @@ class _SpecFile(_Strict):
     randomize: dict[str, Any] = {}
     splits: dict[str, Any] | None = None  # bench_sim.workflows.dataset.splits
     camera: Literal["per_sample", "fixed"] = "per_sample"  # bench_sim.workflows.dataset.targets
+    scene: dict[str, Any] = {}  # bench_sim.workflows.dataset.sample_scene
 
 
 def nested(dotted: Mapping[str, Any]) -> dict[str, Any]:
@@ -344,6 +180,7 @@ class DatasetSpec:
     images: dict[str, str] = field(default_factory=dict)
     splits: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_SPLITS))
     camera: str = "per_sample"
+    scene: dict[str, SceneValue] = field(default_factory=dict)
 
     @property
     def folder(self) -> Path:
@@ -360,16 +197,31 @@ class DatasetSpec:
         blob = {"spec": self.raw, "base_config_sha256": config_sha256(self.base), "images": self.images}
         return hashlib.sha256(json.dumps(blob, sort_keys=True, default=str).encode()).hexdigest()
 
+    @property
+    def word_bits(self) -> int:
+        """The widest output word of any sample [bits] (``dtdi.beta_bits``, or the largest value a
+        ``[randomize]`` entry of it can take): the stored words' dtype holds it."""
+        dist = self.randomize.get("dtdi.beta_bits")
+        drawn = [int(v) for v in dist.probes()] if dist is not None else []
+        return max([int(self.base.dtdi.beta_bits), *drawn])
+
     def draw(self, index: int) -> dict[str, Any]:
         """The randomised values of sample ``index`` (as the manifest lists them: image paths
-        relative to the spec folder)."""
+        relative to the spec folder), then its ``[scene]`` values as ``scene.<key>``
+        (:mod:`bench_sim.workflows.dataset.sample_scene`), from one generator in that order."""
         rng = np.random.default_rng(sample_streams(self.seed, index)[0])
-        return {key: dist.draw(rng) for key, dist in self.randomize.items()}
+        values = {key: dist.draw(rng) for key, dist in self.randomize.items()}
+        if self.scene:
+            rig = any(s.how == "rig" for s in self.scene.values())
+            cfg = self.sample_config(values, index) if rig else self.base
+            values.update({f"scene.{k}": v for k, v in draw_scene(self.scene, rng, index, cfg).items()})
+        return values
 
     def overrides(self, values: Mapping[str, Any]) -> dict[str, Any]:
         """Nested config overrides of drawn ``values`` (``target.image`` resolved against the
-        spec folder, as a config file resolves it against itself)."""
-        resolved = dict(values)
+        spec folder, as a config file resolves it against itself; the ``scene.*`` values are not
+        config keys: :meth:`sample_config` applies them)."""
+        resolved = {k: v for k, v in values.items() if not k.startswith("scene.")}
         if isinstance(resolved.get("target.image"), str):
             resolved["target.image"] = str((self.folder / resolved["target.image"]).resolve())
         return nested(resolved)
@@ -377,7 +229,9 @@ class DatasetSpec:
     def sample_config(self, values: Mapping[str, Any], index: int | None = None) -> BenchConfig:
         """The bench of a sample with the randomised ``values`` (one-line error if invalid)."""
         where = f"{self.path}: sample {index}" if index is not None else f"{self.path} [randomize]"
-        return with_overrides(self.base, self.overrides(values), source=where)
+        cfg = with_overrides(self.base, self.overrides(values), source=where)
+        return place_window(cfg, float(values.get("scene.window_across_mm", 0.0)),
+                            float(values.get("scene.window_along_mm", 0.0)))
 
 
 def _resolve_glob(path: Path, key: str, dist: Glob) -> Glob:
@@ -404,7 +258,7 @@ def _parse_distributions(path: Path, table: Mapping[str, Any]) -> dict[str, Any]
                 f"{path}: randomize.{key} = {entry!r}: expected a table with dist = "
                 f"{' | '.join(DISTRIBUTIONS)}"
             )
-        model = _DIST_MODELS.get(entry["dist"])
+        model = DIST_MODELS.get(entry["dist"])
         if model is None:
             raise BenchSimError(
                 f"{path}: randomize.{key}.dist = {entry['dist']!r}: allowed {', '.join(DISTRIBUTIONS)}"
@@ -473,7 +327,7 @@ def load_spec(path: str | Path) -> DatasetSpec:
         path=path, name=top.name or path.stem, description=top.description, samples=top.samples,
         seed=top.seed, stages=stages, base=base, randomize=randomize, raw=raw, images=images,
         splits=DEFAULT_SPLITS if top.splits is None else check_splits(top.splits, f"{path}: splits"),
-        camera=top.camera,
+        camera=top.camera, scene=parse_scene(path, top.scene),
     )
     _check_keys_and_extremes(spec, _flatten(top.config))
     check_camera(spec.camera, spec.randomize, str(path))

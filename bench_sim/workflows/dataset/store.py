@@ -25,25 +25,33 @@ from bench_sim.errors import BenchSimError
 from bench_sim.io import atomic_path, check_output_dir, umask, write_csv, write_json
 from bench_sim.io.ownership import entries, refuse_foreign, remove_listed
 from bench_sim.io.strict_json import strict_dumps
-from bench_sim.runtime.provenance import provenance
+from bench_sim.pipeline import (
+    COORD_ATTRS,
+    IMAGE_DIMS,
+    STAGE_DIMS,
+    constant_attrs,
+    pass_variables,
+    physical_coords,
+    store_chunks,
+    variable_attrs,
+)
 from bench_sim.version import __version__
-from bench_sim.workflows.dataset.coordinates import constant_attrs, physical_coords, variable_attrs
 from bench_sim.workflows.dataset.reader import (
     COMPLETION_RECORD,
     DATA_STORE,
     DATASET_FILES,
     DATASET_JSON,
     DATASET_KIND,
-    FUSED_VARIABLES,
     MANIFEST_CSV,
+    MANIFEST_META,
     MANIFEST_PARQUET,
     RECORDS_DIR,
-    STAGE_VARIABLES,
+    SAMPLE_COORDS,
     read_records,
-    variable_meta,
 )
-from bench_sim.workflows.dataset.splits import split_indices, split_of
+from bench_sim.workflows.dataset.splits import SPLIT_RULE, split_map, split_sizes
 from bench_sim.workflows.dataset.targets import strict_json
+from bench_sim.workflows.output_meta import chain_provenance, provenance, store_attrs
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -68,20 +76,19 @@ FORMAT_VERSION = 2
 RECORD_BYTES, FIXED_BYTES = 16 * 1024, 8 * 2**20
 
 
-def bytes_per_sample(stages: int, lines: int, columns: int, fused: bool) -> int:
+def bytes_per_sample(spec: DatasetSpec) -> int:
     """Uncompressed bytes of one sample's arrays: an upper bound of what it takes on disk."""
-    per_pixel = sum(np.dtype(d).itemsize for d in STAGE_VARIABLES.values()) * stages
-    if fused:
-        per_pixel += sum(np.dtype(d).itemsize for d in FUSED_VARIABLES.values())
-    return per_pixel * lines * columns
+    lines, cols = spec.base.lines, spec.base.sensor.columns
+    per = list(_schema(spec)["variables"].values())
+    arrays = sum(np.dtype(v["dtype"]).itemsize * int(np.prod(v["shape"][1:])) for v in per)
+    return arrays + 8 * 2 * (lines + cols)  # and its coordinates
 
 
 def estimate_bytes(spec: DatasetSpec, samples: int | None = None) -> int:
     """Upper bound of the bytes a dataset (or ``samples`` of its samples) writes: uncompressed
     arrays, records and manifest rows, plus the card, thumbnails and metadata."""
     n = spec.samples if samples is None else int(samples)
-    per = bytes_per_sample(len(spec.stages), spec.base.lines, spec.base.sensor.columns, spec.fused)
-    return n * (per + RECORD_BYTES) + FIXED_BYTES
+    return n * (bytes_per_sample(spec) + RECORD_BYTES) + FIXED_BYTES
 
 
 # --- the folder ----------------------------------------------------------------------------------
@@ -104,23 +111,23 @@ def folder_state(out: Path) -> str:
 
 
 def _schema(spec: DatasetSpec) -> dict[str, Any]:
-    """``dataset.json``'s ``schema``: every variable's dimensions, type, chunks, shape and units."""
-    lines, cols, n_st = spec.base.lines, spec.base.sensor.columns, len(spec.stages)
+    """``dataset.json``'s ``schema``: every variable's dimensions, stored type, chunks, shape, units
+    and long name (``simulate``'s schema with a ``sample`` dimension,
+    :mod:`bench_sim.pipeline.store_schema`), and the coordinates of each sample."""
+    lines, cols, n_st, n = spec.base.lines, spec.base.sensor.columns, len(spec.stages), spec.samples
     variables: dict[str, Any] = {}
-    for name, dtype in STAGE_VARIABLES.items():
-        variables[name] = {
-            "dims": ["sample", "stage", "line", "column"], "dtype": dtype, "chunks": [1, 1, lines, cols],
-            "shape": [spec.samples, n_st, lines, cols],
-            "units": variable_meta(name)[0], "long_name": variable_meta(name)[1],
+    for v in pass_variables(truth=True, maps=True):
+        if v.dims == IMAGE_DIMS and not spec.fused:
+            continue
+        dims = ("sample", *v.dims)
+        shape = (n, n_st, lines, cols) if v.dims == STAGE_DIMS else (n, lines, cols)
+        variables[v.name] = {
+            "dims": list(dims), "dtype": v.stored_dtype(spec.word_bits).name,
+            "chunks": list(store_chunks(dims, shape)), "shape": list(shape), "units": v.units,
+            "long_name": v.doc,
         }
-    if spec.fused:
-        for name, dtype in FUSED_VARIABLES.items():
-            variables[name] = {
-                "dims": ["sample", "line", "column"], "dtype": dtype, "chunks": [1, lines, cols],
-                "shape": [spec.samples, lines, cols],
-                "units": variable_meta(name)[0], "long_name": variable_meta(name)[1],
-            }
-    return {"variables": variables, "store": DATA_STORE, "zarr_format": 3}
+    coords = {name: {"dims": ["sample", dim], "dtype": "float64"} for name, dim in SAMPLE_COORDS.items()}
+    return {"variables": variables, "sample_coordinates": coords, "store": DATA_STORE, "zarr_format": 3}
 
 
 def _info(spec: DatasetSpec) -> dict[str, Any]:
@@ -142,16 +149,17 @@ def _info(spec: DatasetSpec) -> dict[str, Any]:
         "lines": spec.base.lines,
         "columns": spec.base.sensor.columns,
         "fused": spec.fused,
+        "mu1": int(spec.base.fusion.mu1),
+        "mu2": int(spec.base.fusion.mu2),
         "spec_file": spec_file,
         "spec": spec.raw,
         "spec_sha256": spec.identity(),
         "randomize": {k: d.model_dump() for k, d in spec.randomize.items()},
         "images": spec.images,
         "splits": spec.splits,
-        "split_rule": "sample i is in the split whose cumulative fraction interval (names in alphabetical "
-        "order) holds u = first 8 "
-        "bytes of SHA-256('seed:i') / 2**64 (bench_sim.workflows.dataset.splits)",
-        "split_samples": {k: len(v) for k, v in split_indices(spec.seed, spec.samples, spec.splits).items()},
+        "split_rule": SPLIT_RULE,
+        "split_samples": split_sizes(spec.samples, spec.splits),
+        "scene": {k: sv.as_json() for k, sv in spec.scene.items()},
         "camera": spec.camera,
         "streams": (
             "sample i owns numpy.random.SeedSequence(seed, spawn_key=(i,)) = SeedSequence(seed).spawn(n)[i]; "
@@ -169,44 +177,46 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
     import xarray as xr
 
     info = _info(spec)
-    schema = info["schema"]["variables"]
+    schema = info["schema"]
+    base = spec.base
     coords = {
         "sample": np.arange(spec.samples, dtype=np.int64),
         "stage": np.asarray(spec.stages, dtype=np.int64),
-        "line": np.arange(spec.base.lines, dtype=np.int64),
-        "column": np.arange(spec.base.sensor.columns, dtype=np.int64),
+        "line": np.arange(base.lines, dtype=np.int64),
+        "column": np.arange(base.sensor.columns, dtype=np.int64),
     }
     data = {
         name: (v["dims"], da.zeros(v["shape"], chunks=v["chunks"], dtype=v["dtype"]))
-        for name, v in schema.items()
+        for name, v in schema["variables"].items()
     }
     ds = xr.Dataset(data, coords=coords)
-    ped = float(spec.base.dtdi.pedestal_dn)
-    for name, v in schema.items():
-        ds[name].attrs.update(variable_attrs(name, v["units"], v["long_name"], ped))
-    for cname, (dim, cvalues, cattrs) in physical_coords(spec.base).items():
-        ds.coords[cname] = (dim, cvalues, cattrs)
+    for name in schema["variables"]:
+        ds[name].attrs.update(variable_attrs(base, name))
+    size = {"line": base.lines, "column": base.sensor.columns}
+    for cname, (dim, _values, cattrs) in physical_coords(base).items():
+        zeros = da.zeros((spec.samples, size[dim]), chunks=(1, size[dim]))
+        ds.coords[cname] = (("sample", dim), zeros, cattrs)
     ds["sample"].attrs.update(units="1", long_name="sample index (spawn key of its random stream)")
-    ds["stage"].attrs.update(units="1", long_name="DTDI stage m (rows summed)")
-    ds["line"].attrs.update(units="1", long_name="scene line (material at line * delta along the track)")
-    ds["column"].attrs.update(units="1", long_name="sensor column")
+    for cname, cattrs in COORD_ATTRS.items():
+        ds[cname].attrs.update(cattrs)
     ds.attrs.update(
         title=f"bench_sim dataset {spec.name}",
         seed=spec.seed,
         version=__version__,
         spec_sha256=info["spec_sha256"],
-        base_config=config_to_toml_text(spec.base),
-        base_config_sha256=config_sha256(spec.base),
-        beta_bits=int(spec.base.dtdi.beta_bits),
-        pedestal_dn=float(spec.base.dtdi.pedestal_dn),
+        base_config=config_to_toml_text(base),
+        base_config_sha256=config_sha256(base),
+        beta_bits=int(base.dtdi.beta_bits),
+        pedestal_dn=float(base.dtdi.pedestal_dn),
         complete_samples="see samples/*.json records (status complete) or the manifest",
         camera=spec.camera,
         Conventions="CF-1.10",
-        **constant_attrs(spec.base),
+        **constant_attrs(base),
+        **store_attrs(base),
     )
     if spec.fused:
-        ds.attrs.update(mu1=int(spec.base.fusion.mu1), mu2=int(spec.base.fusion.mu2))
-    encoding = {name: {"chunks": tuple(v["chunks"])} for name, v in schema.items()}
+        ds.attrs.update(mu1=int(base.fusion.mu1), mu2=int(base.fusion.mu2))
+    encoding = {name: {"chunks": tuple(v["chunks"])} for name, v in schema["variables"].items()}
     with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
         warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
         ds.to_zarr(folder / DATA_STORE, mode="w-", zarr_format=3, consolidated=True, compute=False,
@@ -285,27 +295,44 @@ def check_folder(spec: DatasetSpec, out: Path, *, reuse: bool) -> str:
 # --- manifest ------------------------------------------------------------------------------------
 
 
+#: the per-sample metrics of a fused dataset besides those per stage (:func:`metric_names`)
+FUSED_METRICS = ("light_ratio_p01", "light_ratio_p99", "light_ratio_max_dev", "light_ratio_outside_fraction",
+                 "recoverable_fraction")
+
+
+def metric_names(spec: DatasetSpec) -> list[str]:
+    """The summary metrics of a sample (the manifest's columns,
+    :func:`bench_sim.workflows.dataset.run.sample_metrics`)."""
+    names = ["scene_dr_db"]
+    for m in spec.stages:
+        names += [f"saturated_fraction_m{m}", f"snr_dark_m{m}", f"snr_bright_m{m}"]
+    return names + (list(FUSED_METRICS) if spec.fused else [])
+
+
 def manifest_frame(
     spec: DatasetSpec, records: dict[int, dict[str, Any]], values: Sequence[dict[str, Any]]
 ) -> pd.DataFrame:
-    """One row per sample: ``sample``, ``seed``, every randomised key, ``config_sha256``, the
-    summary metrics, ``status`` (``complete`` / ``failed`` / ``pending``), ``error``, ``wall_s``,
-    ``worker``. ``values``: every sample's drawn values (pending samples list theirs)."""
+    """One row per sample: ``sample``, ``seed``, ``split``, every randomised key and
+    ``scene.<key>``, ``light_scale``, ``config_sha256``, the summary metrics, ``status``
+    (``complete`` / ``failed`` / ``pending``), ``error``, ``wall_s``, ``worker``. ``values``: every
+    sample's drawn values (pending samples list theirs)."""
     import pandas as pd
 
-    metric_names: list[str] = ["scene_dr_db"]
-    for m in spec.stages:
-        metric_names += [f"saturated_fraction_m{m}", f"snr_dark_m{m}", f"snr_bright_m{m}"]
+    names = metric_names(spec)
+    splits = split_map(spec.seed, spec.samples, spec.splits)
+    drawn_keys = [*spec.randomize, *(f"scene.{k}" for k in spec.scene)]
     rows = []
     for i in range(spec.samples):
         rec = records.get(i, {})
         drawn = rec.get("values") or values[i]
         metrics = rec.get("metrics") or {}
-        row: dict[str, Any] = {"sample": i, "seed": spec.seed, "split": split_of(spec.seed, i, spec.splits)}
-        row.update({k: drawn.get(k) for k in spec.randomize})
+        row: dict[str, Any] = {"sample": i, "seed": spec.seed, "split": splits[i]}
+        row.update({k: drawn.get(k) for k in drawn_keys})
+        if spec.scene:
+            row["light_scale"] = float(rec.get("scene", {}).get("light_scale", np.nan))
         row["config_sha256"] = rec.get("config_sha256", "")
         # a record's null (strict JSON for a NaN metric) is NaN again in the table
-        row.update({k: float(np.nan if metrics.get(k) is None else metrics[k]) for k in metric_names})
+        row.update({k: float(np.nan if metrics.get(k) is None else metrics[k]) for k in names})
         row.update(
             status=rec.get("status", "pending"), error=rec.get("error") or "",
             wall_s=float(rec.get("wall_s", np.nan)), worker=rec.get("worker", ""),
@@ -317,8 +344,9 @@ def manifest_frame(
 def write_manifest(
     out: Path, spec: DatasetSpec, meta: dict[str, Any], values: Sequence[dict[str, Any]]
 ) -> pd.DataFrame:
-    """``manifest.parquet`` (provenance in the schema metadata, key ``bench_sim``) and
-    ``manifest.csv`` (provenance as ``#`` lines), both rebuilt from the records."""
+    """``manifest.parquet`` (provenance in the schema metadata, key ``bench_sim``), ``manifest.csv``
+    (plain CSV: one header line, one row per sample; ``pandas.read_csv`` reads it as it is) and its
+    sidecar ``manifest.csv.json`` (the provenance and the columns), rebuilt from the records."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -329,7 +357,8 @@ def write_manifest(
     with atomic_path(out / MANIFEST_PARQUET) as tmp:
         pq.write_table(table, tmp)
     rows = [[_csv_value(v) for v in r] for r in df.itertuples(index=False, name=None)]
-    write_csv(out / MANIFEST_CSV, list(df.columns), rows, metadata=meta)
+    write_json(out / MANIFEST_META, strict_json({**meta, "columns": list(df.columns)}))
+    write_csv(out / MANIFEST_CSV, list(df.columns), rows)
     return df
 
 
@@ -338,11 +367,14 @@ def _csv_value(v: Any) -> Any:
         v = v.item()
     return v
 
+
 def manifest_meta(spec: DatasetSpec) -> dict[str, Any]:
     """The provenance of the manifest, the card's thumbnails and the completion record."""
+    chain = chain_provenance(spec.base)
     return {
         "version": __version__, "seed": spec.seed, "config_sha256": config_sha256(spec.base),
-        "spec_sha256": spec.identity(), "dataset": spec.name,
+        "spec_sha256": spec.identity(), "dataset": spec.name, "truth_exact": chain["truth_exact"],
+        **({"truth_not_exact": chain["truth_not_exact"]} if "truth_not_exact" in chain else {}),
     }
 
 

@@ -17,8 +17,16 @@ from bench_sim.config import BenchConfig
 from bench_sim.io import atomic_path, markdown_table, write_text
 from bench_sim.workflows.reproduce.result import PAPER, ReproduceResult
 from bench_sim.workflows.reproduce.seeds import spread_section
+from bench_sim.workflows.reproduce.sharpness_report import SHARPNESS_HEADING, sharpness_section
+from bench_sim.workflows.reproduce.stage_mtf import mtf50_vs_stage_section
 from bench_sim.workflows.reproduce.truth_report import clipped_source_sentence, truth_section
-from bench_sim.workflows.reproduce.wording import SPATIAL, TEMPORAL, pct, read_noise_limit_note
+from bench_sim.workflows.reproduce.wording import (
+    SPATIAL,
+    TEMPORAL,
+    pct,
+    read_noise_ratio,
+    read_noise_ratio_note,
+)
 
 __all__ = ["write_report", "report_markdown", "write_table1", "AGREE_DB", "better_input"]
 
@@ -123,8 +131,8 @@ def _dr_gains(r: ReproduceResult) -> list[str]:
 
 def _ends_sentence(r: ReproduceResult) -> str:
     """Where Gamma_HDR's saturation point and SNR = 1 point lie against its inputs' (measured
-    through the chain), and the noise floor's drop against the read-noise limit (a temporal
-    SNR gain: the ratio of the SNR = 1 points)."""
+    through the chain), and the noise floor's drop (a temporal SNR gain: the ratio of the SNR = 1
+    points) beside the ratio of the two stages' read-noise floors, which is not a bound of it."""
     mu1, mu2 = r.shape.mu1, r.shape.mu2
     img = r.dynamic_range.dr_details.get("images", {})
     try:
@@ -151,8 +159,9 @@ def _ends_sentence(r: ReproduceResult) -> str:
         f"Gamma1's ({low['gamma1']:.4g}), a "
         f"{TEMPORAL} gain of {low['gamma1'] / low['gamma_hdr']:.2f} at the noise floor. Each row is "
         f"read and digitised on its own, so read noise adds up as sqrt(m) in the digital sum: the "
-        f"read-noise limit of that {TEMPORAL} gain is sqrt({mu2}/{mu1}) = {math.sqrt(mu2 / mu1):.2f}, "
-        f"i.e. 10 lg({mu2}/{mu1}) = {limit_db:.2f} dB, not 20 lg."
+        f"{read_noise_ratio(mu1, mu2, 'is')}, i.e. 10 lg({mu2}/{mu1}) = {limit_db:.2f} dB, not 20 lg. It is "
+        "not a bound of the gain at the noise floor: at SNR = 1 the signal's own shot noise weighs "
+        "less in the longer sum, so the gain can exceed it."
     )
 
 
@@ -280,15 +289,15 @@ def _fig3_section(r: ReproduceResult) -> list[str]:
 
 def _fig4_rows(r: ReproduceResult) -> list[list[str]]:
     """The qualitative claims with what was measured: spatial SNRs over the wedge steps (mean /
-    standard deviation over the patch), labelled as such; the read-noise limit, which bounds a
-    temporal SNR gain, beside them for reference only."""
+    standard deviation over the patch), labelled as such; the ratio of the two stages' read-noise
+    floors beside them for reference only (it bounds neither gain)."""
     mu1, mu2 = r.shape.mu1, r.shape.mu2
     q, dark, bright = r.scene.qualitative, r.scene.darkest_patch, r.scene.brightest_patch
     snr = dark["snr"]
     temporal = dark.get("temporal_snr")  # from the truth, where the run measured it
     t_gain = (
         f"; {TEMPORAL} {temporal['gamma_hdr']:.2f} (x{temporal['gamma_hdr'] / temporal['gamma1']:.2f} "
-        f"over Gamma1's, read-noise limit sqrt({mu2}/{mu1}) = {(mu2 / mu1) ** 0.5:.2f})"
+        f"over Gamma1's; {read_noise_ratio_note(mu1, mu2)})"
         if isinstance(temporal, dict) and temporal.get("gamma1") and temporal.get("gamma_hdr") else ""
     )
     b_name = f"the {bright['reflectance']:.0%} patch"
@@ -310,7 +319,7 @@ def _fig4_rows(r: ReproduceResult) -> list[list[str]]:
          _yes(kept)],
         [f"Gamma_HDR lifts the dark detail ({SPATIAL} >= 3 and >= 1.8 x Gamma1's)",
          f"{SPATIAL} {snr['gamma_hdr']:.2f} (x{snr['gamma_hdr'] / max(snr['gamma1'], 1e-9):.2f} over "
-         f"Gamma1's; {read_noise_limit_note(mu1, mu2)}){t_gain}",
+         f"Gamma1's; {read_noise_ratio_note(mu1, mu2)}){t_gain}",
          _yes(q["hdr_lifts_darkest_patch"])],
     ]
 
@@ -429,6 +438,8 @@ def report_markdown(r: ReproduceResult, cfg: BenchConfig, quick: bool) -> str:
         *_fig4_section(r, cfg.fusion.tra),
         *_table1_section(r),
         *(truth_section(r.truth.fusion_truth, r.shape.mu1, r.shape.mu2) if r.truth is not None else []),
+        *(sharpness_section(r.sharpness) if r.sharpness is not None else [SHARPNESS_HEADING, ""]),
+        *mtf50_vs_stage_section(cfg),
         *(spread_section(r.seeds.spread, r.seeds.seeds) if r.seeds is not None else []),
         *_inconsistencies(r),
         *_timings_section(r),

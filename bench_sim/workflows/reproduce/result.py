@@ -23,6 +23,7 @@ __all__ = [
     "SceneResult",
     "RunRecord",
     "TruthResult",
+    "SharpnessResult",
     "SeedsResult",
     "RunTimings",
     "ReproduceResult",
@@ -183,6 +184,26 @@ class TruthResult:
 
 
 @dataclass(frozen=True)
+class SharpnessResult:
+    """The sharpness of the bench (:func:`bench_sim.workflows.reproduce.stage_mtf.sharpness_result`):
+    its lens, the companion pass's e-SFR -- the median over its stages of the MTF50 [cycles/px]
+    and of the SFR at Nyquist, across and along the track -- beside the closed form across the
+    track at the companion's edge angle (lens x pixel aperture, and with the e-SFR's 1/4-px bins),
+    its MTF50, and the warning when the system's MTF50 lies above Nyquist (else ``None``)."""
+
+    lens: str
+    sharpness_stages: list[int]
+    mtf50_across_cyc_px: float | None
+    mtf50_along_cyc_px: float | None
+    mtf_nyquist_across: float | None
+    mtf_nyquist_along: float | None
+    closed_nyquist_across: float
+    closed_nyquist_across_binned: float
+    closed_mtf50_across_cyc_px: float | None
+    nyquist_warning: str | None
+
+
+@dataclass(frozen=True)
 class SeedsResult:
     """``reproduce --seeds N``: the seeds and, per headline number, its mean, sample standard
     deviation and values over them (:mod:`bench_sim.workflows.reproduce.seeds`)."""
@@ -203,12 +224,15 @@ class ReproduceResult:
     timings: RunTimings | None = None
     truth: TruthResult | None = None
     seeds: SeedsResult | None = None
+    sharpness: SharpnessResult | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """``metrics.json``'s dict: the sections' fields, flat, in order."""
         parts: list[Any] = [self.shape, self.dynamic_range, self.table1, self.scene, self.record]
         if self.truth is not None:
             parts.append(self.truth)
+        if self.sharpness is not None:
+            parts.append(self.sharpness)
         if self.seeds is not None:
             parts.append(self.seeds)
         if self.timings is not None:
@@ -234,4 +258,5 @@ class ReproduceResult:
             shape=section(RunShape), dynamic_range=section(DynamicRangeResult),
             table1=section(Table1Result), scene=section(SceneResult), record=section(RunRecord),
             timings=section(RunTimings), truth=section(TruthResult), seeds=section(SeedsResult),
+            sharpness=section(SharpnessResult),
         )

@@ -39,7 +39,7 @@ import numpy as np
 from bench_sim.config import QUICK_OVERRIDES, BenchConfig, quick_config
 from bench_sim.errors import BenchSimError
 from bench_sim.fusion.common import FusionResult
-from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+from bench_sim.fusion.stage_pair import fuse_stage_words, stage_offsets_dn
 from bench_sim.fusion.tonemap import quantize_display, tone_map
 from bench_sim.io import output_set, write_json
 from bench_sim.measure.chain_dr import ChainDR, measure_chain_dynamic_range
@@ -52,15 +52,15 @@ from bench_sim.rig.geometry import rig_geometry
 from bench_sim.rig.target import make_panel
 from bench_sim.runtime.parallel import Lane
 from bench_sim.runtime.progress import progress_bar
-from bench_sim.runtime.provenance import provenance, render_provenance
+from bench_sim.runtime.provenance import render_provenance
 from bench_sim.sensor.model import (
     QUANTIZATION_VAR_DN2,
     dark_noise_e,
-    stage_offset_dn,
     stage_saturation_photons,
     stage_snr1_photons,
 )
 from bench_sim.workflows.estimates import estimate_reproduce
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import check_seed, preflight
 from bench_sim.workflows.reproduce import writing
 from bench_sim.workflows.reproduce.figures import Box
@@ -78,7 +78,7 @@ from bench_sim.workflows.reproduce.result import (
     TruthResult,
 )
 from bench_sim.workflows.reproduce.seeds import check_seeds, headline_numbers, seed_spread
-from bench_sim.workflows.reproduce.stage_mtf import measure_stage_mtf, write_stage_mtf
+from bench_sim.workflows.reproduce.stage_mtf import measure_stage_mtf, sharpness_result, write_stage_mtf
 from bench_sim.workflows.reproduce.truth_figures import write_truth_figures
 from bench_sim.workflows.reproduce.writing import snr_figure, start_image_files
 
@@ -285,20 +285,18 @@ def _pass_and_beside(
 
 
 def _fuse(cfg: BenchConfig, sim: PassResult) -> tuple[FusionResult, np.ndarray]:
-    """Eq. 11 of stages ``mu1``, ``mu2`` (their words carry the pedestal, ``dtdi.pedestal_dn``
-    plus ``m*black`` unless subtracted: removed here) and the 8-bit display ``Gamma_TRA``."""
-    mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
-    off1, off2 = (stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2))
-    fused = fuse_dtdi_hdr_eq11(
-        sim.stage_dn[mu1], sim.stage_dn[mu2], mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=(off1, off2)
-    )
+    """Eq. 11 of stages ``mu1``, ``mu2`` (their words' offsets removed:
+    :func:`bench_sim.fusion.stage_pair.fuse_stage_words`) and the 8-bit display ``Gamma_TRA``."""
+    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
+    fused = fuse_stage_words(cfg, sim.stage_dn[mu1], sim.stage_dn[mu2])
     tra01 = tone_map(fused.hdr, cfg.fusion.tra, full_scale_dn=fused.full_scale_dn)
     return fused, quantize_display(tra01, 8)
 
 
 def _shape(cfg: BenchConfig, stages: list[int], fig3: tuple[int, ...]) -> RunShape:
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
-    off1, off2 = (stage_offset_dn(cfg.sensor, cfg.dtdi, m) for m in (mu1, mu2))
+    off = stage_offsets_dn(cfg, (mu1, mu2))
+    off1, off2 = off[mu1], off[mu2]
     return RunShape(
         mu1=mu1, mu2=mu2, beta=beta, phi_fs_dn=2**beta, pedestal_dn=cfg.dtdi.pedestal_dn,
         stage_offset_dn={"gamma1": off1, "gamma2": off2}, lines=cfg.lines, columns=cfg.sensor.columns,
@@ -408,6 +406,7 @@ def _outputs(
     write_table1(tmp / "table1.csv", result)
     files_written()
     lane.join()
+    result = replace(result, sharpness=sharpness_result(beside.stage_mtf(), cfg))
     timer.add("write", time.perf_counter() - t0)
     return result
 

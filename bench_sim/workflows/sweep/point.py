@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
-from bench_sim.fusion.paper import fuse_dtdi_hdr_eq11
+from bench_sim.fusion.stage_pair import fuse_stage_words
 from bench_sim.measure.chain_dr import measure_chain_dynamic_range
 from bench_sim.measure.fusion_scores import fusion_scores
 from bench_sim.measure.pass_metrics import pass_metrics
@@ -33,7 +33,6 @@ from bench_sim.pipeline import run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
 from bench_sim.runtime.execution import Shared, task_seed_sequence, worker_cache
-from bench_sim.sensor.model import stage_offset_dn
 from bench_sim.workflows.sweep.bands import banding_rows, stage_banding
 from bench_sim.workflows.sweep.light_keys import light_ratio
 from bench_sim.workflows.sweep.plan import IMAGES, TRUTH_REGIONS, TRUTH_RULES, PointTask, banding_column
@@ -193,13 +192,10 @@ def measure_point(task: PointTask, *inputs: Any) -> dict[str, Any]:
     if records is not None:
         install_records(records)
     dr = next((x for x in inputs if not isinstance(x, LightRecords)), None)
-    mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
+    mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
     rng = np.random.default_rng(task_seed_sequence(task.root_seed, task.stream))
     sim = run_pass(cfg, task.stages, rng, truth=True)
-    offsets = (stage_offset_dn(cfg.sensor, cfg.dtdi, mu1), stage_offset_dn(cfg.sensor, cfg.dtdi, mu2))
-    fused = fuse_dtdi_hdr_eq11(
-        sim.stage_dn[mu1], sim.stage_dn[mu2], mu1=mu1, mu2=mu2, beta=beta, pedestal_dn=offsets
-    )
+    fused = fuse_stage_words(cfg, sim.stage_dn[mu1], sim.stage_dn[mu2])
     pm = pass_metrics(cfg, sim, fused)
     rec = _camera_columns(dr if dr is not None else _camera_dr(cfg, task.root_seed, task.dr_levels))
     rec.update(_scene_columns(pm))

@@ -29,8 +29,8 @@ import numpy as np
 from bench_sim.config import config_to_toml_text
 from bench_sim.io import write_csv, write_json
 from bench_sim.io.strict_json import strict_dumps, strict_json
-from bench_sim.runtime.provenance import provenance
 from bench_sim.version import __version__
+from bench_sim.workflows.output_meta import provenance, store_attrs
 from bench_sim.workflows.sweep.plan import SweepPlan, column_docs
 
 __all__ = [
@@ -84,8 +84,9 @@ def points_table(
 def csv_meta(plan: SweepPlan) -> dict[str, Any]:
     units = {c: u for c, (u, _k, _d) in column_docs(plan).items()}
     units.update({"wall_s": "s", "seed": "1", "stream": "1"})
-    return provenance(plan.spec.base, plan.spec.seed, kind="sweep points", spec_sha256=plan.sha256,
-                      swept_keys=list(plan.spec.keys), units=units)
+    return provenance(plan.spec.base, plan.spec.seed, covers=[p.cfg for p in plan.spec.points],
+                      kind="sweep points", spec_sha256=plan.sha256, swept_keys=list(plan.spec.keys),
+                      units=units)
 
 
 #: the sidecar of ``points.csv``: its provenance and the units of every column
@@ -200,6 +201,7 @@ def to_dataset(
         base_config=config_to_toml_text(spec.base),
         sessions=strict_dumps(list(sessions)),
         version=__version__,
+        **store_attrs(spec.base, covers=[p.cfg for p in spec.points]),  # sensor_chain, truth_exact
     )
     return ds
 

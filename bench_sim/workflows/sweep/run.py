@@ -54,7 +54,7 @@ from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.io.strict_json import strict_json
 from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
-from bench_sim.runtime.provenance import provenance
+from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import preflight_tasks
 from bench_sim.workflows.sweep.plan import (
     CAMERA,
@@ -105,8 +105,8 @@ class SweepSummary:
 
 def _value_of(cfg: BenchConfig, key: str) -> Any:
     cur: Any = cfg
-    for part in key.split("."):
-        cur = getattr(cur, part)
+    for part in key.split("."):  # sections and fields; named entries (sensor.effects.<name>) by key
+        cur = cur[part] if isinstance(cur, dict) else getattr(cur, part)
     return list(cur) if isinstance(cur, tuple) else cur
 
 
@@ -137,6 +137,7 @@ def _meta(
     return provenance(
         plan.spec.base,
         plan.spec.seed,
+        covers=[p.cfg for p in plan.spec.points],  # truth_exact only where every point's truth is
         kind="sweep",
         status=status,
         spec=plan.spec.as_dict(),

@@ -54,7 +54,7 @@ import itertools
 import json
 import math
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
@@ -65,6 +65,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, model_validator
 from bench_sim.config import (
     BenchConfig,
     ConfigError,
+    EffectEntry,
     config_from_dict,
     config_to_toml_dict,
     load_config,
@@ -75,6 +76,7 @@ from bench_sim.config import (
 )
 from bench_sim.errors import BenchSimError
 from bench_sim.io.input_files import input_file_problem
+from bench_sim.sensor.effects.chain import effect_kinds
 from bench_sim.workflows.preflight import SEED_RULE, is_seed
 from bench_sim.workflows.sweep.light_keys import LIGHTING_KEYS, adds_light, check_banding_stages, check_ratio
 
@@ -88,6 +90,8 @@ __all__ = [
     "parameter_values",
     "key_exists",
     "set_key",
+    "point_combinations",
+    "point_config",
 ]
 
 MODES = ("product", "sequential", "custom")
@@ -234,15 +238,26 @@ def _err(spec: Path, msg: str) -> BenchSimError:
 
 def key_exists(cfg: BenchConfig, key: str) -> bool:
     """True when the dotted ``key`` names a setting of ``cfg`` (a field of a section, of a light
-    defined in it, or a top-level field)."""
+    defined in it, or a top-level field; a parameter of an effect of ``sensor.effects``, set in
+    ``cfg`` or left at its default, e.g. ``sensor.effects.knee.compression``)."""
     cur: Any = cfg
     for part in key.split("."):
+        if isinstance(cur, Mapping):  # a table of named entries (sensor.effects, a plug-in's args)
+            if part not in cur:
+                return False
+            cur = cur[part]
+            continue
         if not isinstance(cur, BaseModel):
             return False
         extra = cur.__pydantic_extra__ or {}
-        if part not in type(cur).model_fields and part not in extra:
+        if part in type(cur).model_fields or part in extra:
+            cur = getattr(cur, part)
+        elif isinstance(cur, EffectEntry) and cur.kind in effect_kinds():
+            if part not in effect_kinds()[cur.kind].Params.model_fields:
+                return False
+            cur = None  # the effect's parameter at its default: nothing below it
+        else:
             return False
-        cur = getattr(cur, part)
     return True
 
 
@@ -405,21 +420,31 @@ def _parameters(spec: Path, tables: list[dict[str, Any]], mode: str) -> dict[str
 Combos = list[tuple[dict[str, Any], str | None]]
 
 
-def _combinations(spec: Path, top: _SpecFile) -> tuple[tuple[str, ...], dict[str, list[Any]], Combos]:
-    """The swept keys, their values and the points as ``(values, varied key)`` of the mode."""
-    if top.mode == "custom":
-        assert top.points is not None  # checked by _SpecFile
-        keys, rows = _custom_points(spec, top.points)
+def point_combinations(
+    spec: Path, mode: str, parameters: list[dict[str, Any]] | None, points: str | None
+) -> tuple[tuple[str, ...], dict[str, list[Any]], Combos]:
+    """The swept keys, their values and the points as ``(values, varied key)`` of a mode
+    (:data:`MODES`): the ``[[parameters]]`` tables, or the CSV file ``points`` (custom mode).
+    Also used by ``bench-sim design`` for its non-stage keys."""
+    if mode == "custom":
+        assert points is not None  # checked by the spec's model
+        keys, rows = _custom_points(spec, points)
         return keys, {k: [row[k] for row in rows] for k in keys}, [(row, None) for row in rows]
-    assert top.parameters is not None  # checked by _SpecFile
-    values = _parameters(spec, top.parameters, top.mode)
+    assert parameters is not None  # checked by the spec's model
+    values = _parameters(spec, parameters, mode)
     keys = tuple(values)
-    if top.mode == "product":
+    if mode == "product":
         grid = itertools.product(*values.values())
         combos: Combos = [(dict(zip(keys, c, strict=True)), None) for c in grid]
     else:
         combos = [({k: v}, k) for k in keys for v in values[k]]
     return keys, values, combos
+
+
+def point_config(spec: Path, base: dict[str, Any], values: dict[str, Any], index: int) -> BenchConfig:
+    """The validated bench config of point ``index``: ``values`` (dotted keys) set on ``base``
+    (a config's TOML dict); a bad value is one line naming the spec, the point and its values."""
+    return _validated(spec, base, values, index)
 
 
 def load_spec(path: str | Path) -> SweepSpec:
@@ -433,7 +458,7 @@ def load_spec(path: str | Path) -> SweepSpec:
     raw = read_toml(spec, label, "a sweep spec")
     top = validate_model(_SpecFile, raw, label, unknown=f"allowed: {', '.join(SPEC_KEYS)}")
     base_cfg = _base_config(spec, top)
-    keys, values, combos = _combinations(spec, top)
+    keys, values, combos = point_combinations(spec, top.mode, top.parameters, top.points)
     for k in keys:
         if not key_exists(base_cfg, k) and not adds_light(base_cfg, k):
             raise _err(spec, f"key {k!r}: not a setting of the bench config (check the section and name)")
