@@ -1,8 +1,8 @@
 """Ctrl-C and SIGTERM at random moments of real ``bench-sim`` runs, under load: one line, the
 signal's exit status, no hang, nothing partial left behind.
 
-For each command (``simulate``, ``reproduce``, ``sweep``, ``dataset``: small presets, the two
-many-run commands on a local Dask cluster of 2 workers) the script first times one run without
+For each command (``simulate``, ``reproduce``, ``sweep``, ``dataset``, ``design``: small presets,
+the three many-run commands on a local Dask cluster of 2 workers) the script first times one run without
 a signal (the window of the random moments is 1.1 times that, so they fall anywhere from the
 interpreter's start to its exit; ``--window`` sets it instead), then starts the command N times
 and sends a signal at a uniformly random moment: SIGINT to the whole process group (as a
@@ -23,13 +23,13 @@ Each run must end within ``--timeout`` seconds of the signal, and
   ``KeyboardInterrupt`` traceback, or "Fatal Python error: init_import_site" and 1 while it
   imports ``site``), or the handled outcome above if the handlers came in between;
 * always: no temporary (``.partial-``, ``.old-``) and no lock file left, an output folder that
-  is complete (its completion record) or absent, or for ``sweep``/``dataset`` a folder of
+  is complete (its completion record) or absent, or for ``sweep``/``dataset``/``design`` a folder of
   finished records to ``--resume``; no process of the run's session still alive 15 s later
   (worker processes included).
 
 Prints one line per failure and a summary per command; exit status 1 when any run failed.
 
-Usage: ``python scripts/ctrl_c_stress.py [-n 50] [--commands simulate,reproduce,sweep,dataset]
+Usage: ``python scripts/ctrl_c_stress.py [-n 50] [--commands simulate,reproduce,sweep,dataset,design]
 [--burn 2] [--window S] [--seed 0] [--timeout 60]``
 """
 
@@ -81,14 +81,24 @@ columns = 48
 [randomize]
 "lights.strong.irradiance_w_m2" = { dist = "loguniform", low = 32.0, high = 512.0 }
 """
+DESIGN = """base = "tiny.toml"
+seed = 5
+rules = ["eq11", "clip"]
+chain_dr = "chosen"
+objectives = ["dr_db", "truth_rms", "clipped_share", "snr_dark"]
+[[parameters]]
+key = "timing.line_period_s"
+values = [80e-6, 120e-6]
+"""
 #: command -> arguments ({out}: the run's output folder, {specs}: the folder of the files above)
 COMMANDS = {
     "simulate": ["simulate", "{specs}/tiny.toml", "--stages", "2,8", "--out", "{out}"],
     "reproduce": ["reproduce", "--quick", "--out", "{out}"],
     "sweep": ["sweep", "{specs}/sweep.toml", "--out", "{out}", "--workers", "2", "--no-plots"],
     "dataset": ["dataset", "{specs}/dataset.toml", "--out", "{out}", "--workers", "2"],
+    "design": ["design", "{specs}/design.toml", "--out", "{out}", "--workers", "2", "--no-plots"],
 }
-RESUMABLE = {"sweep", "dataset"}
+RESUMABLE = {"sweep", "dataset", "design"}
 LINE = {signal.SIGINT: "bench-sim: interrupted: ", signal.SIGTERM: "bench-sim: terminated: "}
 STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
@@ -98,6 +108,7 @@ def write_specs(folder: Path) -> None:
     (folder / "tiny.toml").write_text(TINY)
     (folder / "sweep.toml").write_text(SWEEP)
     (folder / "dataset.toml").write_text(DATASET)
+    (folder / "design.toml").write_text(DESIGN)
 
 
 def _env() -> dict[str, str]:
@@ -299,7 +310,7 @@ def stress(command: str, n: int, rng: random.Random, window_s: float | None, tim
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-n", type=int, default=50, help="signalled runs per command")
-    ap.add_argument("--commands", default="simulate,reproduce,sweep,dataset",
+    ap.add_argument("--commands", default="simulate,reproduce,sweep,dataset,design",
                     help=f"comma-separated, of {', '.join(COMMANDS)}")
     ap.add_argument("--burn", type=int, default=2, help="busy-looping processes meanwhile (load)")
     ap.add_argument("--window", type=float, default=None,

@@ -498,7 +498,7 @@ BAD_IMAGES: list[tuple[str, Callable[[Path], Path], list[str]]] = [
     ("bool npy", _npy("b.npy", np.zeros((4, 5), bool)), ["b.npy"]),
     ("empty file", _write("e.tif", b""), ["e.tif"]),
     ("gif suffix", _write("x.gif", b"GIF89a"), ["x.gif", "unsupported"]),
-    ("truncated jpeg", _write("x.jpg", b"\xff\xd8\xff"), ["x.jpg", "cannot read image"]),
+    ("truncated jpeg", _write("x.jpg", b"\xff\xd8\xff"), ["x.jpg", "cannot read its header"]),
     ("folder", lambda f: (f / "d.npy").mkdir() or f / "d.npy", ["d.npy"]),
 ]
 

@@ -208,7 +208,7 @@ def test_ctrl_c_while_the_local_cluster_starts_is_delivered_when_the_start_ends(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("command", ["sweep", "dataset"])
+@pytest.mark.parametrize("command", ["sweep", "dataset", "design"])
 def test_ctrl_c_after_the_points_still_says_what_is_kept(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: str
 ) -> None:
@@ -219,6 +219,7 @@ def test_ctrl_c_after_the_points_still_says_what_is_kept(
 
     from bench_sim.cli import app
     from bench_sim.workflows.dataset import run as dataset_run
+    from bench_sim.workflows.design import run as design_run
     from bench_sim.workflows.sweep import run as sweep_run
 
     def interrupted(*args: object, **kwargs: object) -> None:
@@ -227,13 +228,16 @@ def test_ctrl_c_after_the_points_still_says_what_is_kept(
     if command == "sweep":
         monkeypatch.setattr(sweep_run, "write_outputs", interrupted)
         kept = r"4 of 4 points finished are kept in .*; finish with 'bench-sim sweep .* --resume'"
+    elif command == "design":
+        monkeypatch.setattr(design_run, "write_report", interrupted)
+        kept = r"2 of 2 points finished are kept in .*; finish with 'bench-sim design .* --resume'"
     else:
         monkeypatch.setattr(dataset_run, "write_card", interrupted)
         kept = r"4 of 4 samples complete are kept in .*; finish with 'bench-sim dataset .* --resume'"
     ctrl_c_stress.write_specs(tmp_path)
     out = tmp_path / "out"
     res = CliRunner().invoke(app, [command, str(tmp_path / f"{command}.toml"), "--out", str(out),
-                                   "--workers", "0", *(["--no-plots"] if command == "sweep" else [])])
+                                   "--workers", "0", *(["--no-plots"] if command != "dataset" else [])])
     assert res.exit_code == 130, res.output
     lines = _lines(res.stderr)
     assert len(lines) == 1, lines
