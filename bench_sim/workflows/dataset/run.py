@@ -47,6 +47,7 @@ from bench_sim.config import BenchConfig, config_sha256
 from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import check_free_space, format_bytes, write_json
 from bench_sim.io.folder_lock import folder_lock
+from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.io.ownership import entries
 from bench_sim.metrics.fusion_truth import LIGHT_RATIO_TOLERANCE
 from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
@@ -469,8 +470,9 @@ class _SampleWriter:
         }
         if outcome.ok:
             value: SampleOutput = outcome.value
-            for name, arr in value.arrays.items():
-                self.group[name][i] = np.asarray(arr, dtype=self.group[name].dtype)
+            with deferred_interrupts():  # Zarr writes on its own thread: never cut (docs/reliability.md)
+                for name, arr in value.arrays.items():
+                    self.group[name][i] = np.asarray(arr, dtype=self.group[name].dtype)
             rec.update(status="complete", metrics=value.metrics, **value.info)
         else:
             rec.update(status="failed", error=outcome.error)
