@@ -67,6 +67,15 @@ def _leave(code: object) -> None:
                 stream.flush()
             except (OSError, ValueError):  # a closed pipe: nothing more to say to it
                 pass
+        # the last instant: a signal that comes from here on is held (pending), not lost between
+        # the last bytecode (where its handler would run) and the exit; one already pending is said
+        try:
+            signal.pthread_sigmask(signal.SIG_BLOCK, set(_EARLY))
+            pending = signal.sigpending() & set(_EARLY)
+        except (AttributeError, OSError, ValueError):  # pragma: no cover - no signal masks
+            pending = set()
+        if pending:
+            leave_now(min(pending), " as the command ended")
         os._exit(status)
 
     watchdog = threading.Timer(EXIT_FUNCTIONS_S, flush_and_exit)

@@ -185,6 +185,16 @@ def _catches(pid: int, sig: int) -> bool:
     return bool(int(status.split("SigCgt:")[1].split()[0], 16) >> (sig - 1) & 1)
 
 
+def _ended(pid: int) -> bool:
+    """Whether process ``pid`` has ended but is not yet reaped (a zombie: a signal sent to it is
+    lost, and its exit status is the one it ended with)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    return status.split("State:")[1].split()[0] in ("Z", "X")
+
+
 def _leftovers(folder: Path, out: Path, command: str) -> list[str]:
     problems = []
     left = sorted(p.name for p in folder.iterdir() if ".partial-" in p.name or ".old-" in p.name
@@ -208,6 +218,8 @@ def signalled_run(
     # bench_sim's first statement installs its SIGINT and SIGTERM handlers together; before it,
     # in the interpreter's own start-up, a signal has its default action
     early = running and not _catches(proc.pid, signal.SIGTERM)
+    if running and _ended(proc.pid):  # it ended while the above was read: it finished first
+        running = False
     if running:
         try:
             if sig == signal.SIGINT:
