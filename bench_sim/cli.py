@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import signal
 import sys
 import time
 import traceback
@@ -39,6 +38,7 @@ from bench_sim.errors import BenchSimError, kept_note
 from bench_sim.fusion.methods import FUSE_METHODS
 from bench_sim.fusion.tonemap import TONEMAP_METHODS
 from bench_sim.io import format_bytes
+from bench_sim.io.interrupts import Terminated, command_signals, signal_raised
 from bench_sim.render import record_store
 from bench_sim.runtime.backend import choose_backend, versions
 from bench_sim.runtime.resources import available_memory_bytes
@@ -76,10 +76,6 @@ def _say(kind: str, text: str) -> None:
     print(f"{PROG}: {kind}: {line}", file=sys.stderr, flush=True)
 
 
-class _Terminated(BaseException):
-    """SIGTERM, raised in the main thread so output sets clean up as for Ctrl-C."""
-
-
 @contextlib.contextmanager
 def _one_line_warnings() -> Iterator[None]:
     """Show each warning as one line (``bench-sim: warning: ...``), once per message."""
@@ -89,6 +85,8 @@ def _one_line_warnings() -> Iterator[None]:
     seen: set[str] = set()
 
     def show(message: Any, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        if issubclass(category, ResourceWarning) and signal_raised():
+            return  # a socket or file the interrupted step left open: collected while it unwinds
         text = str(message).removeprefix("bench_sim: ")
         if text not in seen:
             seen.add(text)
@@ -101,27 +99,11 @@ def _one_line_warnings() -> Iterator[None]:
         yield
 
 
-@contextlib.contextmanager
-def _sigterm_as_exception() -> Iterator[None]:
-    def handler(signum: int, frame: Any) -> None:
-        raise _Terminated()
-
-    try:
-        old = signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
-
-
 def guarded(func: Callable[[], T]) -> T:
     """Run a command body with the CLI's contract (see the module docstring): exceptions become
     one line and an exit status (:class:`typer.Exit`); usage errors pass through to the group."""
     try:
-        with _one_line_warnings(), _sigterm_as_exception():
+        with command_signals(), _one_line_warnings():
             return func()
     except (typer.Exit, typer.Abort, _click_exc.ClickException):
         raise
@@ -137,7 +119,7 @@ def guarded(func: Callable[[], T]) -> T:
             traceback.print_exc()
         _say("interrupted", f"stopped by Ctrl-C; {kept_note(exc) or _NOTHING_LEFT}")
         raise typer.Exit(EXIT_INTERRUPT) from None
-    except _Terminated as exc:
+    except Terminated as exc:
         _say("terminated", f"stopped by SIGTERM; {kept_note(exc) or _NOTHING_LEFT}")
         raise typer.Exit(EXIT_TERM) from None
     except MemoryError as exc:
@@ -183,7 +165,7 @@ def _interruption(exc: BaseException) -> tuple[str, str] | None:
         seen.add(id(cur))
         if isinstance(cur, KeyboardInterrupt):
             return "interrupted", f"stopped by Ctrl-C; {_NOTHING_LEFT}"
-        if isinstance(cur, _Terminated):
+        if isinstance(cur, Terminated):
             return "terminated", f"stopped by SIGTERM; {_NOTHING_LEFT}"
         cur = cur.__cause__ or cur.__context__
     return None
@@ -246,6 +228,9 @@ class _BenchSimGroup(TyperGroup):
         except KeyboardInterrupt:  # Ctrl-C while parsing, before a command runs
             _say("interrupted", "stopped by Ctrl-C; nothing was written")
             sys.exit(EXIT_INTERRUPT)
+        except Terminated:  # SIGTERM while parsing
+            _say("terminated", "stopped by SIGTERM; nothing was written")
+            sys.exit(EXIT_TERM)
         sys.exit(rv if isinstance(rv, int) else 0)  # an int here is typer.Exit's status
 
 

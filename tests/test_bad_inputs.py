@@ -10,7 +10,10 @@ starting ``bench-sim: error:`` that names the key, file or option, and no file l
 from __future__ import annotations
 
 import math
+import os
 import shutil
+import struct
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -225,6 +228,9 @@ BAD_FILES: list[tuple[str, Callable[[Path], Path], list[str]]] = [
     ("base loop", _base_loop, ["loops back"]),
     ("folder", lambda f: (f / "adir.toml").mkdir() or f / "adir.toml", ["adir.toml", "folder"]),
     ("missing", lambda f: f / "missing.toml", ["missing.toml", "no such file"]),
+    # special files: named as such (before: "no such file"; a FIFO is never opened, it would wait)
+    ("fifo", lambda f: os.mkfifo(f / "pipe.toml") or f / "pipe.toml", ["pipe.toml", "a FIFO (named pipe)"]),
+    ("device", lambda f: Path("/dev/zero"), ["/dev/zero", "a character device"]),
 ]
 
 
@@ -364,10 +370,12 @@ def test_bad_fuse_outputs(tmp_path: Path, opts: list[str], needles: list[str]) -
 
 
 # ------------------------------------------------------------------ resources
-def _huge_npy(folder: Path) -> Path:
-    """A 200,000^2 16-bit NPY: a sparse file whose header alone says 80 GB of pixels."""
+def _huge_npy(folder: Path, side: int = 46_000) -> Path:
+    """A ``side``^2 16-bit NPY: a sparse file whose header alone says 4.2 GB of pixels (below
+    the header bound, :data:`bench_sim.io.image_header.MAX_IMAGE_PIXELS`: the memory check
+    refuses it, about 120 GB decoded)."""
     path = folder / "huge.npy"
-    np.lib.format.open_memmap(path, mode="w+", dtype=np.uint16, shape=(200_000, 200_000))
+    np.lib.format.open_memmap(path, mode="w+", dtype=np.uint16, shape=(side, side))
     return path
 
 
@@ -389,7 +397,7 @@ HUGE: list[tuple[str, list[str], str, list[str]]] = [
     ("reproduce 10^6 lines", ["reproduce", "{cfg}"],
      "lines = 1000000\n[sensor]\ncolumns = 1024\n[target]\npanel_lines = 96\npanel_columns = 1024\n",
      ["not enough memory"]),
-    ("fuse huge images", ["fuse", "{d}/huge.npy", "{d}/huge.npy"], "", ["not enough memory", "200000"]),
+    ("fuse huge images", ["fuse", "{d}/huge.npy", "{d}/huge.npy"], "", ["not enough memory", "46000"]),
 ]
 
 
@@ -456,7 +464,33 @@ def _pickle_npy(folder: Path) -> Path:
     return folder / "obj.npy"
 
 
+def _png_claiming(width: int, height: int) -> Callable[[Path], Path]:
+    """A PNG whose IHDR claims ``width`` x ``height`` pixels (and holds almost nothing)."""
+
+    def make(folder: Path) -> Path:
+        def chunk(kind: bytes, data: bytes) -> bytes:
+            return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+        ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+        path = folder / "claims.png"
+        idat = chunk(b"IDAT", zlib.compress(b"\0" * 9))
+        path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + idat + chunk(b"IEND", b""))
+        return path
+
+    return make
+
+
+def _fifo(folder: Path) -> Path:
+    os.mkfifo(folder / "pipe.npy")
+    return folder / "pipe.npy"
+
+
 BAD_IMAGES: list[tuple[str, Callable[[Path], Path], list[str]]] = [
+    # the pedestal's provenance opened the PNG before the image checks: Pillow's own error, exit 1
+    ("png claiming 10^10 pixels", _png_claiming(100_000, 100_000), ["claims.png", "10000000000 pixels"]),
+    ("png claiming 0 pixels", _png_claiming(0, 5), ["claims.png", "empty image (0 x 5 pixels)"]),
+    ("fifo", _fifo, ["pipe.npy", "is a special file (a FIFO (named pipe))"]),
+    ("device", lambda f: Path("/dev/zero"), ["/dev/zero", "is a special file (a character device)"]),
     ("truncated npy", _truncated_npy, ["cut.npy"]),
     ("rgb png", _rgb_png, ["rgb.png", "shape (4, 5, 3)"]),
     ("object npy", _pickle_npy, ["obj.npy"]),
@@ -464,7 +498,7 @@ BAD_IMAGES: list[tuple[str, Callable[[Path], Path], list[str]]] = [
     ("bool npy", _npy("b.npy", np.zeros((4, 5), bool)), ["b.npy"]),
     ("empty file", _write("e.tif", b""), ["e.tif"]),
     ("gif suffix", _write("x.gif", b"GIF89a"), ["x.gif", "unsupported"]),
-    ("truncated jpeg", _write("x.jpg", b"\xff\xd8\xff"), ["x.jpg", "cannot read image"]),
+    ("truncated jpeg", _write("x.jpg", b"\xff\xd8\xff"), ["x.jpg", "cannot read its header"]),
     ("folder", lambda f: (f / "d.npy").mkdir() or f / "d.npy", ["d.npy"]),
 ]
 
@@ -476,6 +510,15 @@ def test_bad_fuse_images(tmp_path: Path, make: Callable[[Path], Path], needles: 
     before = _files(tmp_path)
     r = runner.invoke(app, ["fuse", str(tmp_path / "low.npy"), str(bad), "--out", str(tmp_path / "o.exr")])
     assert_refused(r, tmp_path, before, *needles)
+
+
+@pytest.mark.parametrize("shape", [(0, 0), (0, 8), (8, 0)])
+def test_mtf_of_an_empty_image_is_one_line(tmp_path: Path, shape: tuple[int, int]) -> None:
+    """An empty image (0 x 0: a ValueError of numpy's reductions before, exit status 1)."""
+    np.save(tmp_path / "empty.npy", np.zeros(shape, np.uint16))
+    before = _files(tmp_path)
+    r = runner.invoke(app, ["mtf", str(tmp_path / "empty.npy"), "--out", str(tmp_path / "m")])
+    assert_refused(r, tmp_path, before, "empty.npy", "empty image")
 
 
 # ------------------------------------------------------------------ environment

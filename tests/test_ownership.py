@@ -1,8 +1,9 @@
 """Never delete what is not ours: every command on a folder of someone else's files (with a
 ``points/`` and a ``samples/`` subfolder, the names our journals use) is refused in one line and
-leaves every file as it was; ``--resume`` of a sweep whose ``sweep.json`` was lost keeps every
-finished record; a point record of another spec is never overwritten; a lock path planted as a
-link is refused and its target unchanged.
+leaves every file as it was (``design``, ``ptc --area``, ``calibrate`` of images and ``mtf`` of a
+photograph too); ``--resume`` of a sweep (a design) whose ``sweep.json`` (``design.json``) was
+lost keeps every finished record; a point record of another spec is never overwritten; a lock
+path planted as a link is refused and its target unchanged.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import pytest
 from typer.testing import CliRunner
 
 from bench_sim.cli import app
-from bench_sim.io import OUTPUT_MARKER
+from bench_sim.io import OUTPUT_MARKER, write_frames_npz
 from bench_sim.io.folder_lock import lock_path
 from tests.metrics.test_sfr import edge_image
 from tests.test_bad_inputs import _inputs
@@ -50,13 +51,44 @@ def _users_folder(folder: Path) -> Path:
     return folder
 
 
+#: a design of the tiny bench: one point, eq. 11 (the spec of tests/workflows/test_design_resume.py, smaller)
+DESIGN = ("base = 'tiny.toml'\nseed = 1\nrules = ['eq11']\nchain_dr = 'chosen'\n"
+          "objectives = ['dr_db', 'truth_rms']\n")
+
+
+def _frames_npz(path: Path) -> Path:
+    """A small frames file (three lit levels of two 8 x 8 images, their darks)."""
+    rng = np.random.default_rng(0)
+    flats = rng.poisson(np.array([50.0, 100.0, 200.0])[:, None, None, None], (3, 2, 8, 8)) + 10.0
+    write_frames_npz(path, {"exposure_s": [1e-3] * 3, "photons_per_pixel": [100.0, 200.0, 400.0],
+                            "flats": flats, "darks": rng.poisson(10.0, (3, 2, 8, 8)).astype(float)})
+    return path
+
+
+def _photo(path: Path) -> Path:
+    """A slanted edge as an 8-bit grey PNG (a photograph)."""
+    from PIL import Image
+
+    Image.fromarray(np.clip(edge_image((64, 48), 5.0, sigma=0.8) / 4, 0, 255).astype(np.uint8)).save(path)
+    return path
+
+
 def _command(name: str, tmp: Path, out: Path) -> list[str]:
     cfg = _inputs(tmp, "lines = 600\n[target]\npanel_lines = 256\n" if name == "reproduce" else "")
     if name == "calibrate":
         return ["calibrate", str(_csv(tmp / "ptc.csv", _rows())), "--out", str(out)]
+    if name == "calibrate-images":
+        return ["calibrate", str(_frames_npz(tmp / "frames.npz")), "--out", str(out)]
     if name == "mtf":
         np.save(tmp / "edge.npy", edge_image((64, 48), 5.0, sigma=0.8))
         return ["mtf", str(tmp / "edge.npy"), "--out", str(out)]
+    if name == "mtf-photo":
+        return ["mtf", str(_photo(tmp / "edge.png")), "--out", str(out)]
+    if name == "ptc-area":
+        return ["ptc", str(cfg), "--area", "--out", str(out)]
+    if name == "design":
+        (tmp / "design.toml").write_text(DESIGN)
+        return ["design", str(tmp / "design.toml"), "--out", str(out), "--workers", "0"]
     if name == "export-point":
         return ["sweep", str(tmp / "sweep.toml"), "--export-point", "0", str(out)]
     if name == "init":
@@ -67,11 +99,11 @@ def _command(name: str, tmp: Path, out: Path) -> list[str]:
     return [name, str(cfg), *stages, "--out", str(out)]
 
 
-COMMANDS = ["render", "simulate", "reproduce", "ptc", "calibrate", "mtf", "init", "export-point",
-            "sweep", "dataset"]
+COMMANDS = ["render", "simulate", "reproduce", "ptc", "ptc-area", "calibrate", "calibrate-images", "mtf",
+            "mtf-photo", "init", "export-point", "sweep", "dataset", "design"]
 
 
-CASES = [(c, False) for c in COMMANDS] + [("sweep", True), ("dataset", True)]
+CASES = [(c, False) for c in COMMANDS] + [("sweep", True), ("dataset", True), ("design", True)]
 
 
 @pytest.mark.parametrize(("command", "resume"), CASES, ids=[c + (" --resume" if r else "") for c, r in CASES])
@@ -132,6 +164,30 @@ def test_resume_after_sweep_json_is_lost_keeps_every_finished_record(tmp_path: P
     assert _records(out) == records
     assert (out / "points.csv").read_text() == table
     assert json.loads((out / "sweep.json").read_text())["status"] == "complete"
+    assert (out / OUTPUT_MARKER).is_file()
+
+
+@pytest.mark.slow
+def test_resume_after_design_json_is_lost_keeps_every_finished_record(tmp_path: Path) -> None:
+    """A finished design loses ``design.json`` and its completion record: ``--resume`` keeps
+    every point record and its scores byte for byte, computes no point again and gives the same
+    candidates."""
+    _inputs(tmp_path)
+    out = tmp_path / "de"
+    args = _command("design", tmp_path, out) + ["--no-plots"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.stderr
+    kept = {p.name: p.read_bytes() for p in sorted((out / "points").iterdir())}
+    table = (out / "candidates.csv").read_text()
+    assert len(kept) == 2  # the record and its scores
+    (out / "design.json").unlink()
+    (out / OUTPUT_MARKER).unlink()
+    res = runner.invoke(app, [*args, "--resume"])
+    assert res.exit_code == 0, res.stderr
+    assert {p.name: p.read_bytes() for p in sorted((out / "points").iterdir())} == kept
+    assert (out / "candidates.csv").read_text() == table
+    sessions = json.loads((out / "design.json").read_text())["sessions"]
+    assert sessions[-1]["ran"] == [] and sessions[-1]["skipped"] == 1
     assert (out / OUTPUT_MARKER).is_file()
 
 

@@ -3,8 +3,8 @@ processes on the loopback interface only (127.0.0.1):
 
 1. one writer per output folder: a second run is refused at once naming the first, the first
    finishes with its own data; a lock left by a killed run is taken over;
-2. Ctrl-C at random moments of ``reproduce --quick``: exit 130, one line, nothing left behind
-   (a few runs here; ``scripts/ctrl_c_stress.py`` runs 50);
+2. Ctrl-C and SIGTERM at random moments of the long commands: ``tests/test_signals.py`` (and
+   ``scripts/ctrl_c_stress.py``, 50 signals per command);
 3. ``--scheduler`` at something that is not a Dask scheduler (a socket that accepts and never
    answers, an HTTP server, a bad address): refused in one line within the timeout; a scheduler
    with no worker: one line after the wait; a scheduler killed mid-sweep: one line, exit 3, the
@@ -21,7 +21,6 @@ from __future__ import annotations
 import http.server
 import json
 import os
-import random
 import re
 import signal
 import socket
@@ -209,30 +208,6 @@ def test_a_live_lock_refuses_a_dataset_and_a_dead_ones_is_taken_over(tmp_path: P
         assert not lock_path(out).exists()  # taken over, then released
     finally:
         _stop([holder])
-
-
-# --- 2. Ctrl-C at any moment -----------------------------------------------------------------------
-
-
-@pytest.mark.slow
-def test_ctrl_c_at_random_moments_of_reproduce_quick(tmp_path: Path) -> None:
-    """SIGINT to the process group at uniformly random times in the first 3 s (6 runs here;
-    ``scripts/ctrl_c_stress.py -n 50`` for the long version): exit 130 and one line every time
-    (or 0 when it finished first), no temporaries, no incomplete --out, no fatal error."""
-    rng = random.Random(27)
-    for i in range(6):
-        out = tmp_path / f"run{i}"
-        proc = _child(["reproduce", "--quick", "--out", str(out)])
-        time.sleep(rng.uniform(0.0, 3.0))
-        os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-        lines = _lines(err)
-        if proc.returncode != 0:
-            assert proc.returncode == 130, err
-            assert len(lines) == 1 and lines[0].startswith("bench-sim: interrupted: "), lines
-            assert not out.exists()
-        left = [p.name for p in tmp_path.rglob("*") if ".partial-" in p.name or ".old-" in p.name]
-        assert not left, left
 
 
 # --- 3. Dask failure modes -------------------------------------------------------------------------

@@ -30,6 +30,7 @@ from bench_sim.config.lighting import LIGHT_KINDS, LightConfig
 from bench_sim.config.plausible import plausibility_error
 from bench_sim.config.serialise import config_to_toml_dict
 from bench_sim.errors import BenchSimError, ConfigWarning
+from bench_sim.io.input_files import input_file_problem
 
 __all__ = [
     "SCENES_DIR",
@@ -74,12 +75,12 @@ def read_toml(path: Path, label: str, what: str = "a config") -> dict[str, Any]:
     Raises
     ------
     ConfigError
-        One line: a folder, no such file, unreadable, not UTF-8, NUL bytes or not valid TOML.
+        One line: no such file, a folder or a special file (a FIFO, a device), unreadable, not
+        UTF-8, NUL bytes or not valid TOML.
     """
-    if path.is_dir():
-        raise ConfigError(f"{label}: is a folder, not a TOML file")
-    if not path.is_file():
-        raise ConfigError(f"{label}: no such file")
+    problem = input_file_problem(path)  # missing, a folder, a FIFO or device (never opened)
+    if problem is not None:
+        raise ConfigError(f"{label}: {problem}")
     try:
         raw = path.read_bytes()
     except OSError as exc:
@@ -322,10 +323,17 @@ def warn_config(cfg: BenchConfig, source: str) -> None:
 
 def load_config(path: str | Path | None = None) -> BenchConfig:
     """Load and validate a bench config from TOML (default: ``scenes/paper_rig.toml``); its odd
-    but legal settings are warned about (:func:`config_warnings`)."""
+    but legal settings are warned about (:func:`config_warnings`), and so is a file with no
+    settings at all (it runs the defaults, the paper rig)."""
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     p = p.resolve()
-    return config_from_dict(_read_config_file(p), source=str(p), warn=True)
+    data = _read_config_file(p)
+    if not data:  # an empty file (or comments only): legal, but say what it runs
+        warnings.warn(
+            f"{p}: no settings (an empty file): it runs the defaults, the paper rig "
+            f"({DEFAULT_CONFIG_PATH.name})", ConfigWarning, stacklevel=2,
+        )
+    return config_from_dict(data, source=str(p), warn=True)
 
 
 def with_overrides(cfg: BenchConfig, overrides: dict[str, Any], source: str = "<overrides>") -> BenchConfig:

@@ -111,7 +111,9 @@ def _guess(value: float, typ: Typical) -> str:
 
 
 def judge(key: str, value: Any, typ: Typical) -> str | None:
-    """Why ``value`` of ``key`` is a unit slip against ``typ`` (one line), or ``None``."""
+    """The unit-slip line of ``key = value`` against the typical range ``typ`` (``None`` when
+    the value is plausible, zero, or not a finite number): the check of every config key, and of
+    the physical quantities of other inputs (``bench-sim calibrate``'s exposure times)."""
     if typ.vector:
         if not isinstance(value, list | tuple):
             return None

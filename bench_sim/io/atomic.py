@@ -238,12 +238,28 @@ def write_failure(
 # --- one file ----------------------------------------------------------------------------------------
 
 
+def _make_parents(folder: Path) -> None:
+    """Make ``folder`` and its missing parents, but never an output set's temporary folder
+    (``.NAME.partial-...``): one that is missing was removed because its run was interrupted,
+    and a step still writing on another thread (a pool's worker) must fail rather than make it
+    again and leave it behind."""
+    missing = []
+    p = folder
+    while not p.exists() and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    if any(".partial-" in m.name for m in missing):
+        why = "its output set was removed (the run was interrupted)"
+        raise FileNotFoundError(errno.ENOENT, why, str(folder))
+    folder.mkdir(parents=True, exist_ok=True)
+
+
 @contextlib.contextmanager
 def _deferred_path(path: Path) -> Iterator[tuple[Path, Callable[[], None]]]:
     """A temporary beside ``path`` and a function that renames it into place; removed on exit
     unless committed. Files are not locked (writers such as HDF5 lock the files they write, and
     an flock held here would make them fail); a stale one is told by its dead process or age."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    _make_parents(path.parent)
     _remove_stale_temporaries(path)
     prefix = f".{path.name}.partial-{os.getpid()}-"
     fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=path.suffix, dir=path.parent)

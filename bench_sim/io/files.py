@@ -2,8 +2,8 @@
 
 JSON files carry their provenance as keys (the dict of
 :func:`bench_sim.runtime.provenance.provenance`: ``version``, ``seed``, ``config_sha256``,
-``config``); :func:`json_default` is the one encoding of numpy values and paths used by every
-writer that stores JSON (files, EXR/TIFF/PNG attributes, CSV comment lines).
+``config``); they are strict JSON (:func:`bench_sim.io.strict_json.strict_dumps`, the one
+encoding of every writer that stores JSON: files, EXR/TIFF/PNG attributes, CSV comment lines).
 """
 
 from __future__ import annotations
@@ -15,13 +15,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from bench_sim.io.atomic import atomic_path
+from bench_sim.io.strict_json import strict_dumps
 
 __all__ = [
     "format_bytes",
-    "json_default",
     "read_json",
     "sha256_file",
     "sha256_text",
@@ -51,22 +49,12 @@ def sha256_file(path: str | os.PathLike[str]) -> str:
         return hashlib.file_digest(f, "sha256").hexdigest()
 
 
-def json_default(obj: Any) -> Any:
-    """``json.dumps``'s ``default``: numpy scalars and arrays as Python values, paths as text."""
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
-
-
 def write_json(path: str | os.PathLike[str], data: Mapping[str, Any]) -> Path:
-    """Write ``data`` as indented, key-sorted JSON, atomically."""
+    """Write ``data`` as indented, key-sorted strict JSON (a non-finite number as ``null``,
+    :func:`~bench_sim.io.strict_json.strict_dumps`), atomically."""
     path = Path(path)
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=json_default) + "\n")
+        tmp.write_text(strict_dumps(data, indent=2, sort_keys=True) + "\n")
     return path
 
 

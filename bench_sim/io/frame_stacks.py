@@ -26,8 +26,8 @@ At least one of ``darks`` and ``dark_images`` is needed.
 
 from __future__ import annotations
 
-import json
 import os
+import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -36,7 +36,8 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError
 from bench_sim.io.atomic import atomic_path
-from bench_sim.io.files import json_default
+from bench_sim.io.image_header import MAX_IMAGE_PIXELS
+from bench_sim.io.strict_json import strict_dumps
 
 __all__ = ["FRAME_ARRAYS", "write_frames_npz", "read_frames_npz"]
 
@@ -63,7 +64,7 @@ def write_frames_npz(
         raise BenchSimError(f"frames file: unknown arrays {sorted(unknown)}; allowed {sorted(FRAME_ARRAYS)}")
     data = {k: np.asarray(v) for k, v in arrays.items()}
     if metadata is not None:
-        data["metadata"] = np.asarray(json.dumps(dict(metadata), default=json_default))
+        data["metadata"] = np.asarray(strict_dumps(dict(metadata)))
     p = Path(path)
     with atomic_path(p) as tmp:
         with open(tmp, "wb") as fh:
@@ -84,16 +85,55 @@ def _array(path: Path, data: Any, name: str) -> np.ndarray | None:
     return arr
 
 
+def _member_shapes(path: Path) -> dict[str, tuple[int, ...]]:
+    """The shape of every array of an ``.npz`` from its ``.npy`` headers alone (no array read)."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            with zf.open(info) as f:
+                version = np.lib.format.read_magic(f)
+                read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                        else np.lib.format.read_array_header_2_0)
+                shape, _, _ = read(f)
+            shapes[info.filename[: -len(".npy")]] = tuple(int(n) for n in shape)
+    return shapes
+
+
+def _check_sizes(p: Path) -> None:
+    """Refuse, from the arrays' headers and before any is read, empty images and a file whose
+    arrays claim more than :data:`~bench_sim.io.image_header.MAX_IMAGE_PIXELS` values (a damaged
+    or hostile file: its arrays would be allocated as the headers say)."""
+    try:
+        shapes = _member_shapes(p)
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        detail = " ".join(str(exc).split())[:120] or exc.__class__.__name__
+        raise BenchSimError(f"{p}: not a readable .npz frames file ({detail})") from None
+    for name, shape in shapes.items():
+        if FRAME_ARRAYS.get(name) == 4 and len(shape) == 4 and 0 in shape[2:]:
+            raise BenchSimError(f"{p}: array {name!r} holds empty images ({shape[3]} x {shape[2]} pixels)")
+    total = sum(int(np.prod(s, dtype=object)) for s in shapes.values())
+    if total > MAX_IMAGE_PIXELS:
+        raise BenchSimError(
+            f"{p}: its arrays' headers claim {total} values: more than {MAX_IMAGE_PIXELS} "
+            "(a damaged or hostile file?)"
+        )
+
+
 def read_frames_npz(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """Read and check a frames file: its arrays by name (module docstring), shapes consistent.
 
     Raises
     ------
     BenchSimError
-        Not a readable ``.npz``, a missing ``exposure_s`` or ``flats``, no dark images, an array
-        of the wrong dimensions or length, images of another size, fewer than two per level.
+        Not a readable ``.npz``, empty images or more values than
+        :data:`~bench_sim.io.image_header.MAX_IMAGE_PIXELS` by the arrays' headers (before any
+        is read), a missing ``exposure_s`` or ``flats``, no dark images, an array of the wrong
+        dimensions or length, images of another size, fewer than two per level.
     """
     p = Path(path)
+    _check_sizes(p)
     try:
         data = np.load(p, allow_pickle=False)
     except (OSError, ValueError) as exc:

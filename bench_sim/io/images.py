@@ -25,7 +25,9 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError
 from bench_sim.io.atomic import atomic_path
-from bench_sim.io.files import json_default
+from bench_sim.io.image_header import image_size_problem
+from bench_sim.io.input_files import input_file_problem
+from bench_sim.io.strict_json import strict_dumps
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -86,7 +88,7 @@ def write_exr(
         raise ValueError(f"EXR channels must be 2-D arrays of one shape, got {sorted(shapes)}")
     header: dict[str, Any] = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     if metadata is not None:
-        header["bench_sim"] = json.dumps(metadata, sort_keys=True, default=json_default)
+        header["bench_sim"] = strict_dumps(metadata, sort_keys=True)
     chans = {
         name: np.ascontiguousarray(np.asarray(arr, dtype=np.float32))
         for name, arr in channels.items()
@@ -126,7 +128,7 @@ def write_tiff16(
         raise ValueError(f"{path}: a 16-bit TIFF needs a 2-D image, got shape {arr.shape}")
     if arr.size and (arr.min() < 0 or arr.max() > 65535):
         raise ValueError(f"{path}: values must lie in 0..65535, got {arr.min()}..{arr.max()}")
-    desc = json.dumps(metadata or {}, sort_keys=True, default=json_default)
+    desc = strict_dumps(metadata or {}, sort_keys=True)
     with atomic_path(path) as tmp:
         tifffile.imwrite(tmp, arr.astype(np.uint16), description=desc, metadata=None)
     return Path(path)
@@ -137,7 +139,7 @@ def _png_info(metadata: Mapping[str, Any] | None) -> Any:
 
     info = PngImagePlugin.PngInfo()
     if metadata is not None:
-        info.add_text("bench_sim", json.dumps(metadata, sort_keys=True, default=json_default))
+        info.add_text("bench_sim", strict_dumps(metadata, sort_keys=True))
     return info
 
 
@@ -214,18 +216,19 @@ def carries_provenance(path: str | os.PathLike[str]) -> bool:
 
 
 def image_file_problem(path: str | os.PathLike[str]) -> str | None:
-    """Why ``path`` cannot be read as an image (``"no such file"``, ``"unsupported file type
-    ..."``, ``"not readable"``), or ``None``: the one check of an input image file, before
-    anything is decoded. Callers put their own name of the file in front."""
+    """Why ``path`` cannot be read as an image (``"no such file"``, a folder or special file,
+    ``"unsupported file type ..."``, ``"not readable"``, an empty image or one too large by its
+    header, :mod:`bench_sim.io.image_header`), or ``None``: the one check of an input image
+    file, before anything is decoded. Callers put their own name of the file in front."""
     path = Path(path)
-    if not path.is_file():
-        return "no such file"
+    if (kind := input_file_problem(path)) is not None:  # missing, a folder, a FIFO, a device
+        return kind
     suffix = path.suffix.lower()
     if suffix not in IMAGE_SUFFIXES:
         return f"unsupported file type '{suffix}' (allowed: {', '.join(IMAGE_SUFFIXES)})"
     if not os.access(path, os.R_OK):
         return "not readable"
-    return None
+    return image_size_problem(path)  # empty, or too large a size in its header
 
 
 def check_image_file(path: str | os.PathLike[str]) -> tuple[Path, str]:

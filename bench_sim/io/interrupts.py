@@ -1,30 +1,234 @@
-"""Ctrl-C (SIGINT) and SIGTERM held back while a step must not be cut in half.
+"""Ctrl-C (SIGINT) and SIGTERM: held back while a step must not be cut in half, never raised
+inside an import, and the same at every moment of a ``bench-sim`` process.
 
 Python runs a signal's handler in the main thread, between two bytecodes, wherever the program
 is: in the middle of creating a temporary folder (which would then be left behind), of removing
-one, or of importing a C extension such as Mitsuba/Dr.Jit (a half-initialised extension can
-abort the interpreter at exit, and an import cut short can leave the import lock held).
-:func:`deferred_interrupts` holds such signals for the duration of a block: its handler only
-records the signal (nothing else runs in it, so it is safe wherever it fires), and at the end of
-the block the previous handlers are restored and each held signal is raised again, so the usual
-``KeyboardInterrupt`` (or the CLI's SIGTERM handling) happens at a clean point, just after the
-step.
+one, or of importing a module. An exception raised inside the import machinery (for instance
+between ``_imp.acquire_lock()`` and its ``try`` in ``importlib._bootstrap``, or in the weakref
+callback of a module lock) leaves the import lock held: the next import in any thread waits for
+ever, and the process hangs instead of stopping.
 
-Blocks nest; outside the main thread (where handlers cannot be installed) the block runs as is.
+* :func:`deferred_interrupts` holds such signals for the duration of a block: its handler only
+  records the signal (nothing else runs in it, so it is safe wherever it fires), and at the end
+  of the block the previous handlers are restored and each held signal is raised again, so the
+  usual ``KeyboardInterrupt`` (or :class:`Terminated`) happens at a clean point, just after the
+  step. Blocks nest; outside the main thread the block runs as is.
+* :func:`command_signals` is the handling of a command's run: SIGINT raises
+  ``KeyboardInterrupt`` and SIGTERM :class:`Terminated`, except while the main thread is inside
+  an import (an ``importlib`` frame on its stack, or the import lock held): then the signal is
+  sent again a moment later (:data:`REDELIVER_S`) by a thread started beforehand, until the
+  import has ended. An import that does not end within :data:`IMPORT_PATIENCE_S` is given up:
+  one line and the exit status at once (a killed run's temporaries are removed by the next run).
+* :func:`own_process_signals` (called by ``bench-sim``'s entry point once the command line is
+  imported) makes that handling the process's own, and :func:`command_signals` then ends the
+  process at once, with one line and the signal's exit status (130, 143), for a signal that
+  comes after the command's work (while the interpreter exits): a signal never ends in status 0.
 """
 
 from __future__ import annotations
 
+import _imp
 import contextlib
+import os
 import signal
+import sys
 import threading
+import time
+import warnings
 from collections.abc import Iterator
+from types import FrameType
 from typing import Any
 
-__all__ = ["deferred_interrupts", "HELD_SIGNALS"]
+__all__ = [
+    "EXIT_STATUS",
+    "HELD_SIGNALS",
+    "IMPORT_PATIENCE_S",
+    "REDELIVER_S",
+    "Terminated",
+    "command_signals",
+    "deferred_interrupts",
+    "importing",
+    "leave_if_pending",
+    "leave_now",
+    "own_process_signals",
+    "signal_exception",
+    "signal_raised",
+]
 
 #: The signals held back: Ctrl-C and the polite termination request
 HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: Exit status of the command line after each signal (128 + its number)
+EXIT_STATUS: dict[int, int] = {signal.SIGINT: 130, signal.SIGTERM: 143}
+#: How soon a signal that came during an import is sent again [s]
+REDELIVER_S = 0.02
+#: Longest wait for an import to end before a signal ends the process regardless [s]
+IMPORT_PATIENCE_S = 60.0
+#: What each signal is called in the one line
+_NAMES: dict[int, tuple[str, str]] = {
+    signal.SIGINT: ("interrupted", "Ctrl-C"),
+    signal.SIGTERM: ("terminated", "SIGTERM"),
+}
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread (as ``KeyboardInterrupt`` is for SIGINT) so that
+    output sets clean up and the command line says what was kept."""
+
+
+def signal_exception(signum: int) -> BaseException:
+    """The exception a command's run raises for signal ``signum``."""
+    return KeyboardInterrupt() if signum == signal.SIGINT else Terminated()
+
+
+def importing(frame: FrameType | None) -> bool:
+    """Whether the main thread, stopped at ``frame``, is inside an import: an ``importlib``
+    frame on its stack (the import system or a module being executed by it), or the import
+    lock held."""
+    if _imp.lock_held():
+        return True
+    f = frame
+    while f is not None:
+        name = f.f_code.co_filename
+        if name.startswith("<frozen importlib") or "importlib/_bootstrap" in name:
+            return True
+        f = f.f_back
+    return False
+
+
+def _one_line(signum: int, when: str) -> bytes:
+    kind, what = _NAMES.get(signum, ("terminated", f"signal {signum}"))
+    return f"bench-sim: {kind}: stopped by {what}{when}\n".encode()
+
+
+def leave_now(signum: int, when: str) -> None:
+    """One line on stderr, ``bench-sim: interrupted: stopped by Ctrl-C`` + ``when`` (or
+    ``terminated ... SIGTERM``), and the signal's exit status, at once (no unwinding)."""
+    with contextlib.suppress(Exception):  # the main thread may be inside a write to stdout
+        sys.stdout.flush()
+    os.write(2, _one_line(signum, when))
+    os._exit(EXIT_STATUS.get(signum, 128 + signum))
+
+
+class _Redelivery:
+    """A thread, started before it is needed, that sends a signal again to this process a
+    moment after the handler found the main thread inside an import (the handler only writes
+    one byte to a pipe: no lock is taken in it)."""
+
+    def __init__(self) -> None:
+        self.pid = os.getpid()
+        self.since: dict[int, float] = {}
+        read_fd, self.write_fd = os.pipe()
+        os.set_blocking(self.write_fd, False)
+        threading.Thread(target=self._run, args=(read_fd,), name="bench-sim signals", daemon=True).start()
+
+    def _run(self, read_fd: int) -> None:
+        while True:
+            data = os.read(read_fd, 64)
+            if not data:  # pragma: no cover - the pipe is never closed
+                return
+            time.sleep(REDELIVER_S)
+            for signum in dict.fromkeys(data):
+                os.kill(self.pid, signum)
+
+    def later(self, signum: int) -> None:
+        first = self.since.setdefault(signum, time.monotonic())
+        if time.monotonic() - first > IMPORT_PATIENCE_S:
+            leave_now(signum, f" (an import did not end within {IMPORT_PATIENCE_S:g} s)")
+        with contextlib.suppress(BlockingIOError):  # the pipe full: a byte is waiting already
+            os.write(self.write_fd, bytes([signum]))
+
+
+_REDELIVERY: _Redelivery | None = None
+#: the signals raised as exceptions in this process so far
+_RAISED: list[int] = []
+
+
+def signal_raised() -> bool:
+    """Whether a signal has been raised as its exception in this process (the run is being
+    interrupted): what the interrupted step leaves open is then not reported."""
+    return bool(_RAISED)
+
+#: whether this process is ``bench-sim`` itself (own_process_signals was called)
+_OWN_PROCESS = False
+
+
+def _redelivery() -> _Redelivery:
+    global _REDELIVERY
+    if _REDELIVERY is None or _REDELIVERY.pid != os.getpid():  # none yet, or a forked child
+        _REDELIVERY = _Redelivery()
+    return _REDELIVERY
+
+
+def leave_if_pending(when: str) -> None:
+    """:func:`leave_now` for a signal that came during an import and is still waiting to be sent
+    again (:data:`REDELIVER_S`): called before the process leaves, so that it is not lost."""
+    if _REDELIVERY is not None and _REDELIVERY.pid == os.getpid():
+        for signum in list(_REDELIVERY.since):
+            leave_now(signum, when)
+
+
+def _import_safe(redelivery: _Redelivery) -> Any:
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if os.getpid() == redelivery.pid and importing(frame):
+            redelivery.later(signum)
+            return
+        redelivery.since.pop(signum, None)
+        _RAISED.append(signum)
+        raise signal_exception(signum)
+
+    return handler
+
+
+def _ignore_unraisable(unraisable: Any) -> None:
+    """``sys.unraisablehook`` once the command has ended: nothing more is said."""
+
+
+def _late(signum: int, frame: FrameType | None) -> None:
+    leave_now(signum, " as the command ended")
+
+
+def _install(handler: Any) -> dict[int, Any]:
+    return {sig: signal.signal(sig, handler) for sig in HELD_SIGNALS}
+
+
+def own_process_signals() -> None:
+    """Make :func:`command_signals`' handling this process's own (``bench-sim``'s entry point,
+    once the command line is imported): SIGINT and SIGTERM raise their exception, never inside
+    an import, from now on; after a command, a signal ends the process at once."""
+    global _OWN_PROCESS
+    _install(_import_safe(_redelivery()))
+    _OWN_PROCESS = True
+
+
+@contextlib.contextmanager
+def command_signals() -> Iterator[None]:
+    """SIGINT as ``KeyboardInterrupt``, SIGTERM as :class:`Terminated`, never raised inside an
+    import, for a command's run (see the module docstring). In the ``bench-sim`` process
+    (:func:`own_process_signals`), once the block ends a signal ends the process at once with
+    one line and its exit status; elsewhere (a command run in a test) the previous handlers are
+    restored. Outside the main thread the block runs as is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _RAISED.clear()  # a new command: nothing interrupted yet
+    if _OWN_PROCESS:
+        try:
+            yield
+        finally:
+            _install(_late)
+            leave_if_pending(" as the command ended")  # one that came during a last import
+            # nor a warning or an "Exception ignored" after the command's own lines (a coroutine
+            # of an interrupted write, or an object half-made when the signal came, collected
+            # while the process exits)
+            warnings.simplefilter("ignore")
+            sys.unraisablehook = _ignore_unraisable
+        return
+    previous = _install(_import_safe(_redelivery()))
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
 
 
 @contextlib.contextmanager

@@ -20,6 +20,7 @@ import errno
 import os
 import shutil
 import tempfile
+import time
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -195,6 +196,17 @@ def _replace_set(tmp: Path, out: Path, what: str) -> None:
         os.close(old_fd)
 
 
+def _remove_temporary(tmp: Path, tries: int = 20, pause_s: float = 0.05) -> None:
+    """Remove an output set's temporary folder; again a moment later while it is still there (a
+    step on another thread, cut short by Ctrl-C in this one, may still be writing a file into
+    it: the removal then finds the folder not empty)."""
+    for _ in range(tries):
+        shutil.rmtree(tmp, ignore_errors=True)
+        if not tmp.exists():
+            return
+        time.sleep(pause_s)
+
+
 @contextlib.contextmanager
 def output_set(
     out: str | os.PathLike[str], record: Mapping[str, Any] | None = None, what: str = "--out"
@@ -242,7 +254,7 @@ def output_set(
         _replace_set(tmp, out, what)
     except BaseException as exc:
         with deferred_interrupts():  # a second Ctrl-C must not cut the clean-up short
-            shutil.rmtree(tmp, ignore_errors=True)
+            _remove_temporary(tmp)
         failure = write_failure(exc, out, what)
         if failure is not None:
             raise failure from None

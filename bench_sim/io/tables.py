@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
@@ -19,7 +18,8 @@ from typing import Any
 import numpy as np
 
 from bench_sim.errors import BenchSimError
-from bench_sim.io.files import json_default, write_text
+from bench_sim.io.files import write_text
+from bench_sim.io.strict_json import strict_dumps
 
 __all__ = ["comment_lines", "markdown_table", "write_csv", "read_csv_columns"]
 
@@ -33,9 +33,7 @@ def comment_lines(metadata: Mapping[str, Any] | None) -> list[str]:
     if not metadata:
         return []
     head = " ".join(f"{k} {metadata[k]}" for k in ("version", "seed", "config_sha256") if k in metadata)
-    return [f"# bench_sim {head}".rstrip(), "# provenance: " + json.dumps(
-        metadata, sort_keys=True, default=json_default
-    )]
+    return [f"# bench_sim {head}".rstrip(), "# provenance: " + strict_dumps(metadata, sort_keys=True)]
 
 
 def write_csv(

@@ -29,9 +29,18 @@ from typing import Any
 
 import numpy as np
 
+from bench_sim.config.plausible import Typical, judge
 from bench_sim.errors import BenchSimError
 
-__all__ = ["PtcTable", "make_table"]
+__all__ = ["EXPOSURE_TYPICAL", "BELOW_DARK_SE", "PtcTable", "make_table"]
+
+#: Typical exposure time of an EMVA 1288 measurement: a value more than 10 times outside is
+#: refused as a unit slip (milliseconds written as seconds), as a config's keys are
+#: (:func:`bench_sim.config.plausible.judge`).
+EXPOSURE_TYPICAL = Typical(1e-6, 1.0, "s")
+#: A lit mean this many standard errors below its dark level is refused (a table that gives its
+#: pixel count; without one, any lit mean below its dark level is refused).
+BELOW_DARK_SE = 5.0
 
 
 @dataclass(frozen=True)
@@ -148,6 +157,7 @@ def _check_rows(cols: dict[str, np.ndarray], lit: np.ndarray, order: np.ndarray 
             raise BenchSimError(
                 f"{source}: row {i + 1}: {name} = {cols[name][i]:g} < 0: {what} cannot be negative"
             )
+    _check_exposures(cols["exposure_s"], source)
     if lit.size < 3:
         raise BenchSimError(f"{source}: {lit.size} lit rows: need at least 3")
     tl = cols["exposure_s"][lit]
@@ -163,6 +173,35 @@ def _check_rows(cols: dict[str, np.ndarray], lit: np.ndarray, order: np.ndarray 
         raise BenchSimError(
             f"{source}: row {i + 1}: the irradiation does not increase over the row before "
             "(lit levels must be listed in increasing irradiation)"
+        )
+
+
+def _check_exposures(t: np.ndarray, source: str) -> None:
+    """Refuse an exposure time of 0 (dark rows too) or one in the wrong unit (a unit slip)."""
+    if (t == 0).any():
+        i = int(np.flatnonzero(t == 0)[0])
+        raise BenchSimError(
+            f"{source}: row {i + 1}: exposure_s = 0: every level (dark rows too) is measured over an "
+            "exposure time > 0 s"
+        )
+    for i, value in enumerate(t):
+        slip = judge("exposure_s", float(value), EXPOSURE_TYPICAL)
+        if slip:
+            raise BenchSimError(f"{source}: row {i + 1}: {slip}")
+
+
+def _check_above_dark(table: PtcTable, lit: np.ndarray) -> None:
+    """Refuse a lit level whose mean lies below its dark level (swapped columns, or the dark pair
+    of another exposure time): its signal ``mu_y - mu_y.dark`` would be negative. With a pixel
+    count, a lit mean within :data:`BELOW_DARK_SE` standard errors of its dark level is noise."""
+    tol = BELOW_DARK_SE * table.signal_se_dn() if table.pixels else np.zeros(lit.size)
+    below = np.flatnonzero(table.mean_dn < table.dark_mean_dn - tol)
+    if below.size and table.dark_mean_known:
+        j = int(below[0])
+        raise BenchSimError(
+            f"{table.source}: row {int(lit[j]) + 1}: mean_dn = {table.mean_dn[j]:g} below its dark level "
+            f"{table.dark_mean_dn[j]:g} DN: a lit level cannot be darker than the dark (mean_dn and "
+            "dark_mean_dn swapped, or the dark rows of another exposure time?)"
         )
 
 
@@ -259,8 +298,10 @@ def make_table(
     ------
     BenchSimError
         One line naming the row and value: a value not finite; a negative variance, irradiation
-        or exposure time; the lit levels' exposure time decreasing (non-monotonic exposure) or
-        their irradiation not increasing; a lit level without a dark level; a missing column.
+        or exposure time; an exposure time of 0 or in the wrong unit (milliseconds written as
+        seconds); the lit levels' exposure time decreasing (non-monotonic exposure) or their
+        irradiation not increasing; a lit level without a dark level or below it; a missing
+        column.
     """
     n = np.asarray(exposure_s, dtype=object).ravel().size
     given = {"exposure_s": exposure_s, "photons_per_pixel": photons_per_pixel,
@@ -276,7 +317,7 @@ def make_table(
     t = cols["exposure_s"]
     _check_rows(cols, lit, x if kind != "none" else None, source)
     pairs, ut, levels = _dark_levels(cols, mean, var, lit, drk, source)
-    return PtcTable(
+    table = PtcTable(
         exposure_s=t[lit],
         photons=x[lit] if kind == "photons" else None,
         irradiance=x[lit] if kind != "none" else None,
@@ -298,3 +339,5 @@ def make_table(
         row_noise_var_dn2=float(max(row_noise_var_dn2, 0.0)),
         columns=int(columns),
     )
+    _check_above_dark(table, lit)
+    return table

@@ -15,9 +15,10 @@ misleading message:
   service) is refused, naming what was found.
 - :func:`wait_for_workers`: a connected scheduler with no worker is waited for a grace period
   (one warning line), then refused with the count.
-- :func:`quiet_local_cluster`: a ``LocalCluster`` whose worker processes ignore Ctrl-C (the
+- :func:`quiet_local_cluster`: a ``LocalCluster`` whose worker processes never take Ctrl-C (the
   terminal sends it to the whole process group; the client process shuts them down itself), so
-  Ctrl-C prints one line, not a worker's traceback.
+  Ctrl-C prints one line, not a worker's traceback; a Ctrl-C while the cluster starts is held
+  and delivered when the start ends (the cluster then closed again), never lost.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from bench_sim.errors import BenchSimError, ClusterError
+from bench_sim.io.interrupts import deferred_interrupts
 
 __all__ = [
     "SCHEMES",
@@ -153,18 +155,27 @@ def wait_for_workers(client: Any, address: str, grace_s: float = 10.0, timeout_s
 
 
 @contextlib.contextmanager
-def _ignoring_sigint() -> Iterator[None]:
-    """SIGINT ignored while worker processes start (they inherit the disposition); the client
-    process's own handler is back at the end of the block."""
+def _sigint_blocked_for_new_workers() -> Iterator[None]:
+    """SIGINT blocked in this thread during the block: the threads started in it (the cluster's
+    event loop, which starts the worker processes) and so the worker processes inherit the
+    blocked signal and never take Ctrl-C (the client process stops them). In this process a
+    SIGINT that comes meanwhile stays pending, or goes to another thread, and is not lost: the
+    Python handler (:func:`~bench_sim.io.interrupts.deferred_interrupts`' while the cluster
+    starts) runs once the block ends."""
+    from multiprocessing import resource_tracker
+
+    # started here first: started from the cluster's event loop it would unblock SIGINT in that
+    # thread afterwards (its ensure_running blocks, spawns, then unblocks), and so in the workers
+    resource_tracker.ensure_running()
     try:
-        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:  # not the main thread: the workers behave as before
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    except (AttributeError, OSError):  # pragma: no cover - a platform without signal masks
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _own_process_group() -> None:
@@ -187,25 +198,30 @@ def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
         # the scheduler's HTTP endpoints fall back to a free port when 8787 is taken (another
         # cluster on the machine): nothing the user needs to act on
         warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
-        with _ignoring_sigint():
-            cluster = LocalCluster(
-                n_workers=n_workers,
-                threads_per_worker=1,
-                processes=True,
-                # its HTTP endpoints on a free loopback port: the default 8787, when taken by another
-                # cluster, leaks a socket in the retry (an "unclosed socket" ResourceWarning)
-                dashboard_address="127.0.0.1:0",
-                silence_logs=logging.CRITICAL,
-                # one core per worker: the chain's own thread pools use one thread in a worker
-                env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
-            )
-    try:
-        with _ignoring_sigint():
-            client = Client(cluster)
-            client.run(_own_process_group)  # in every worker of the cluster
-    except BaseException:
-        _close_quietly(None, cluster)
-        raise
+        cluster: Any = None
+        client: Any = None
+        try:
+            # Ctrl-C and SIGTERM held while the cluster starts (5-30 s under load) and delivered
+            # when the start ends: here, where the cluster is closed again before they go on
+            with deferred_interrupts():
+                with _sigint_blocked_for_new_workers():
+                    cluster = LocalCluster(
+                        n_workers=n_workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        # its HTTP endpoints on a free loopback port: the default 8787, when taken by
+                        # another cluster, leaks a socket in the retry (an "unclosed socket" warning)
+                        dashboard_address="127.0.0.1:0",
+                        silence_logs=logging.CRITICAL,
+                        # one core per worker: the chain's own thread pools use one thread in a worker
+                        env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
+                    )
+                client = Client(cluster)
+                client.run(_own_process_group)  # in every worker of the cluster
+        except BaseException:
+            if cluster is not None:
+                _close_quietly(client, cluster)
+            raise
     try:
         yield client
     finally:

@@ -12,7 +12,7 @@ record as it completes; ``--resume`` reads them back to know what is done. One r
   recomputed, and a one-line :class:`RuntimeWarning` names the file, once per file and process.
 
 The content is the JSON form of :func:`bench_sim.io.write_json` (indented, keys sorted, one
-newline at the end, numpy values as :func:`bench_sim.io.files.json_default` encodes them), so the
+newline at the end, strict JSON as :func:`bench_sim.io.strict_json.strict_dumps` writes it), so the
 same run writes the same bytes.
 """
 
@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from bench_sim.io import atomic_path
-from bench_sim.io.files import json_default
+from bench_sim.io.strict_json import strict_dumps
 
 __all__ = ["Journal", "write_record", "read_records"]
 
@@ -67,7 +67,7 @@ def write_record(path: str | os.PathLike[str], record: Mapping[str, Any]) -> Pat
     """
     path = Path(path)
     # the JSON form of bench_sim.io.write_json (tested byte for byte)
-    text = json.dumps(record, indent=2, sort_keys=True, default=json_default) + "\n"
+    text = strict_dumps(record, indent=2, sort_keys=True) + "\n"
     with atomic_path(path) as tmp:  # a temporary beside path, renamed onto it on success
         with open(tmp, "w") as f:
             f.write(text)

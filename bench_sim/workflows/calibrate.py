@@ -238,10 +238,10 @@ def calibrate(
     base = load_config(config if config is not None else DEFAULT_CONFIG_PATH)
     mu1, mu2 = stages if isinstance(stages, tuple) else parse_stage_pair(stages, base)
     parse_stage_pair(f"{mu1},{mu2}", base)
+    out_path = check_output_dir(out)  # before the images are read and analysed
     inp = read_input(input_path)
     fit, frames, tab = _fit(inp)
     twin = twin_from_fit(inp, fit, base, frames) if fit is not None else twin_from_results(inp, base)
-    out_path = check_output_dir(out)
     with tempfile.TemporaryDirectory(prefix="bench_sim_twin_") as folder:
         sec = _with_files(twin, Path(folder))
         cfg = with_overrides(

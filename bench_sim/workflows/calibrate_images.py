@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from bench_sim.errors import BenchSimError
-from bench_sim.io import ImageReadError, read_frames_npz, read_image
+from bench_sim.io import ImageReadError, image_file_problem, read_frames_npz, read_image
 from bench_sim.metrics.frame_series import FrameSeries, LitLevel
 
 __all__ = ["MANIFEST", "read_frames_file", "read_frames_folder"]
@@ -102,6 +102,10 @@ def read_frames_folder(folder: Path) -> FrameSeries:
         raise BenchSimError(
             f"{path}: missing column(s) {', '.join(missing)}; required: file, kind, exposure_s"
         )
+    for r in rows:  # every file's header before any image is decoded
+        problem = image_file_problem(folder / r["file"].strip())
+        if problem is not None:
+            raise BenchSimError(f"{folder / r['file'].strip()}: {problem}")
     xname = next((c for c in ("photons_per_pixel", "relative_irradiance") if c in names), None)
     flats: dict[tuple[float, float | None], list[np.ndarray]] = {}
     darks: dict[float, list[np.ndarray]] = {}

@@ -37,6 +37,7 @@ import numpy as np
 from bench_sim.config import read_toml
 from bench_sim.errors import BenchSimError
 from bench_sim.io import ImageReadError, read_image
+from bench_sim.io.input_files import input_file_problem
 from bench_sim.metrics.emva1288 import mean_var_from_pair, spatial_nonuniformity
 from bench_sim.metrics.frame_series import FrameSeries
 from bench_sim.metrics.ptc_table import PtcTable, make_table
@@ -361,6 +362,9 @@ def read_input(path: str | Path) -> CalibrationInput:
     p = Path(path)
     if not p.exists():
         raise BenchSimError(f"{p}: no such file or folder")
+    problem = input_file_problem(p)  # a FIFO or a device is never opened
+    if problem is not None and not p.is_dir():
+        raise BenchSimError(f"{p}: {problem}")
     suffix = p.suffix.lower()
     if (p.is_dir() and (p / MANIFEST).is_file()) or suffix == ".npz":
         return _images(p)

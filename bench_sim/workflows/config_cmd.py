@@ -26,6 +26,7 @@ from bench_sim.config import DEFAULT_CONFIG_PATH, SCENES_DIR, config_to_toml_tex
 from bench_sim.config.catalogue import KeyInfo, config_keys, config_sections, model_keys
 from bench_sim.config.plausible import Typical
 from bench_sim.errors import BenchSimError
+from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.sensor.effects.base import Effect
 from bench_sim.sensor.effects.chain import effect_kinds, sensor_chain
 
@@ -111,8 +112,28 @@ def show_text(config: Path) -> str:
     )
 
 
+def _copy_scenes(dest: Path) -> list[Path]:
+    """Copy the shipped examples into the new folder ``dest``: folders and files made with this
+    process's umask (not the package's modes). Returns the files, relative to ``dest``."""
+    ignored = shutil.ignore_patterns(*INIT_IGNORED)
+    written: list[Path] = []
+    for root, dirs, files in os.walk(SCENES_DIR):
+        skip = ignored(root, [*dirs, *files])
+        dirs[:] = sorted(d for d in dirs if d not in skip)
+        rel = Path(root).relative_to(SCENES_DIR)
+        (dest / rel).mkdir(parents=True, exist_ok=True)
+        for name in sorted(f for f in files if f not in skip):
+            shutil.copyfile(Path(root) / name, dest / rel / name)
+            written.append(rel / name)
+    return sorted(written)
+
+
 def init_folder(folder: Path) -> list[Path]:
     """Copy the shipped examples (``bench_sim/scenes/``) into the new folder ``folder``.
+
+    The files are written into a temporary folder beside it first; a new folder is then renamed
+    into place, an existing empty one filled (it is kept, with its own mode and owner). Files
+    and folders get this process's umask.
 
     Returns
     -------
@@ -122,8 +143,8 @@ def init_folder(folder: Path) -> list[Path]:
     Raises
     ------
     BenchSimError
-        ``folder`` is a file, or a folder that is not empty (nothing is overwritten), or cannot be
-        written.
+        ``folder`` is a file, a folder that is not empty (nothing is overwritten) or cannot be
+        written, or the copy fails (a full disk): one line, nothing left behind.
     """
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
@@ -132,6 +153,8 @@ def init_folder(folder: Path) -> list[Path]:
         raise BenchSimError(
             f"init: {folder}: is not empty; give a new or empty folder (nothing is overwritten)"
         )
+    if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
+        raise BenchSimError(f"init: {folder}: cannot be written (no permission); it is left as it is")
     parent = folder.resolve().parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
@@ -141,11 +164,17 @@ def init_folder(folder: Path) -> list[Path]:
         raise BenchSimError(f"init: {parent}: cannot be written (no permission)")
     tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.partial-", dir=parent))
     try:
-        shutil.copytree(SCENES_DIR, tmp / "x", ignore=shutil.ignore_patterns(*INIT_IGNORED))
-        written = sorted(p.relative_to(tmp / "x") for p in (tmp / "x").rglob("*") if p.is_file())
-        if folder.is_dir():
-            folder.rmdir()  # empty (checked above)
-        (tmp / "x").rename(folder)
+        written = _copy_scenes(tmp / "x")
+        with deferred_interrupts():  # all of the files or none
+            if folder.is_dir():  # empty (checked above): filled, not replaced
+                for entry in sorted((tmp / "x").iterdir()):
+                    os.replace(entry, folder / entry.name)
+            else:
+                (tmp / "x").rename(folder)
+    except OSError as exc:  # a full disk, a quota: one line (not shutil's list of every file)
+        where = exc.filename or folder
+        raise BenchSimError(f"init: {where}: cannot be written ({exc.strerror or exc}); nothing was "
+                            f"left in {folder}") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return written

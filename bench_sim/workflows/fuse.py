@@ -42,6 +42,7 @@ from bench_sim.fusion.methods import FUSE_METHODS, check_fuse_method, fuse_pair
 from bench_sim.fusion.paper import eq11_threshold_dn
 from bench_sim.fusion.tonemap import TONEMAP_METHODS, gamma_tra
 from bench_sim.io import (
+    check_image_file,
     check_output_file,
     image_shape,
     output_files,
@@ -288,6 +289,8 @@ def fuse_files(
     method = check_fuse_method(method, "--method")  # before any work
     low_p, high_p, out_p = Path(low), Path(high), Path(out)
     tra_p = Path(tra) if tra is not None else None
+    for p in (low_p, high_p):  # each input checked (kind, type, size in its header) before
+        check_image_file(p)  # anything opens it: the pedestal's provenance reads its metadata
     if pedestal_dn is None:
         pedestal_dn, pedestal_source = default_pedestal_dn(low_p, high_p)
     else:

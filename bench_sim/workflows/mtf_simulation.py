@@ -29,7 +29,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig, config_from_dict
 from bench_sim.errors import BenchSimError
-from bench_sim.io import output_set, read_json, write_json
+from bench_sim.io import image_file_problem, output_set, read_json, write_json
 from bench_sim.measure.sharpness import DIRECTIONS, SFR_FREQUENCY_CYC_PX, StageImage, mean_curve, stage_images
 from bench_sim.metrics.edge_finder import find_edges
 from bench_sim.metrics.sfr import check_roi_bounds
@@ -66,9 +66,19 @@ def is_simulation_output(path: Path) -> bool:
     return _source(Path(path)) is not None
 
 
+def _read_tiff(path: Path) -> np.ndarray:
+    """One TIFF of a simulate output, its header checked first (a FIFO, an empty image or one
+    claiming too many pixels is one line, :func:`bench_sim.io.image_file_problem`)."""
+    import tifffile
+
+    problem = image_file_problem(path)
+    if problem is not None:
+        raise BenchSimError(f"{path}: {problem}")
+    return np.asarray(tifffile.imread(path))
+
+
 def _tiff_dataset(meta_path: Path) -> tuple[xr.Dataset, dict[str, Any], str]:
     """The TIFF set of ``simulate --format tiff`` as a dataset, its config and the config's SHA-256."""
-    import tifffile
     import xarray as xr
 
     meta = read_json(meta_path)
@@ -81,10 +91,10 @@ def _tiff_dataset(meta_path: Path) -> tuple[xr.Dataset, dict[str, Any], str]:
         names = [n for m in stages for n, f in files.items() if f["variable"] == var and f["stage"] == m]
         if len(names) == len(stages) and stages:
             data[var] = (("stage", "line", "column"),
-                         np.stack([tifffile.imread(meta_path.parent / n) for n in names]))
+                         np.stack([_read_tiff(meta_path.parent / n) for n in names]))
     for n, f in files.items():
         if f.get("stage") is None and f["variable"] in ("gamma_hdr", "gamma_hdr_source"):
-            data[f["variable"]] = (("line", "column"), tifffile.imread(meta_path.parent / n))
+            data[f["variable"]] = (("line", "column"), _read_tiff(meta_path.parent / n))
     if "dn" not in data:
         raise BenchSimError(f"{meta_path}: lists no stage words (stage_MMM_dn.tiff)")
     if "clipped" in data:

@@ -12,7 +12,6 @@ and writes the :class:`xarray.Dataset` as Zarr, NetCDF or TIFF (:func:`write_sim
 
 from __future__ import annotations
 
-import json
 import warnings
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
@@ -23,6 +22,8 @@ import numpy as np
 from bench_sim.config import BenchConfig, load_config, warn_config, with_overrides
 from bench_sim.errors import BenchSimError
 from bench_sim.io import output_set, write_csv, write_json
+from bench_sim.io.interrupts import deferred_interrupts
+from bench_sim.io.strict_json import strict_dumps
 from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges, sharpness_curves, sharpness_summary
 from bench_sim.pipeline import (
     IMAGE_DIMS,
@@ -202,13 +203,16 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
     """
     if fmt in ("zarr", "netcdf"):
         ds = stored_dataset(ds, int(ds.attrs["beta_bits"]))
+    # never cut by Ctrl-C (held, then delivered): Zarr writes on its own thread, and the locks of
+    # xarray and HDF5 an interruption leaves held would deadlock the store's close
     if fmt == "zarr":
-        with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
+        with warnings.catch_warnings(), deferred_interrupts():  # consolidated: a Zarr v3 extension
             warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
             ds.to_zarr(folder / FORMATS["zarr"], mode="w-", zarr_format=3, consolidated=True)
         return [FORMATS["zarr"]]
     if fmt == "netcdf":
-        ds.to_netcdf(folder / FORMATS["netcdf"])
+        with deferred_interrupts():
+            ds.to_netcdf(folder / FORMATS["netcdf"])
         return [FORMATS["netcdf"]]
     if fmt != "tiff":
         raise BenchSimError(f"--format = {fmt!r}: allowed {', '.join(FORMATS)}")
@@ -218,7 +222,7 @@ def write_simulation(ds: xr.Dataset, folder: Path, fmt: str, meta: Mapping[str, 
 
     def put(name: str, arr: np.ndarray, var: Variable, stage: int | None) -> None:
         info = {"variable": var.name, "stage": stage, "units": var.units, "long_name": var.doc}
-        desc = json.dumps({**meta, **info}, sort_keys=True, default=str)
+        desc = strict_dumps({**meta, **info}, sort_keys=True, default=str)
         dtype = tiff_dtype(var)
         tifffile.imwrite(folder / name, np.asarray(arr).astype(dtype), description=desc, metadata=None)
         files[name] = {**info, "dtype": np.dtype(dtype).name}

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
+from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.pipeline import (
     COORD_ATTRS,
     VARIABLES_BY_NAME,
@@ -89,7 +90,9 @@ class ZarrPassSink:
         import zarr
 
         ds = _template(cfg, st, seed, setup, truth)
-        with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
+        # Zarr writes on its own thread: a write cut by Ctrl-C would go on there after the output
+        # set's temporary folder is removed, and make its folders again; so no write is cut
+        with warnings.catch_warnings(), deferred_interrupts():  # consolidated: a Zarr v3 extension
             warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
             ds.to_zarr(path, mode="w-", zarr_format=3, consolidated=True, compute=False)
         self.stages = {int(m): s for s, m in enumerate(st)}
@@ -134,6 +137,13 @@ class ZarrPassSink:
         stages (one chunk's) at a time, then drop the file."""
         arr, path = self.arrays[name], self._file(name, row)
         per_stage = (r1 - r0) * arr.shape[-1]
+        with deferred_interrupts():  # never cut (see __init__)
+            self._write_chunks(arr, path, per_stage, r0, r1)
+        path.unlink()
+        del self.rows[name][row]
+
+    @staticmethod
+    def _write_chunks(arr: Any, path: Path, per_stage: int, r0: int, r1: int) -> None:
         if arr.ndim == 2:
             arr[r0:r1] = np.fromfile(path, dtype=arr.dtype).reshape(r1 - r0, -1)
         else:
@@ -142,8 +152,6 @@ class ZarrPassSink:
                 block = np.fromfile(path, dtype=arr.dtype, count=(s1 - s0) * per_stage,
                                     offset=s0 * per_stage * arr.dtype.itemsize)
                 arr[s0:s1, r0:r1] = block.reshape(s1 - s0, r1 - r0, -1)
-        path.unlink()
-        del self.rows[name][row]
 
     def close(self) -> None:
         """Check that every row of chunks was written; remove the spill folder."""

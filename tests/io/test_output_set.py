@@ -219,3 +219,34 @@ def test_a_file_added_during_the_run_is_kept(tmp_path: Path) -> None:
         (out / "draft.md").write_text("written meanwhile")
     assert (out / "draft.md").read_text() == "written meanwhile" and (out / "meta.json").read_text() == "1"
     assert _temporaries(tmp_path) == []
+
+
+def test_a_step_still_writing_after_the_set_is_removed_does_not_make_it_again(tmp_path: Path) -> None:
+    """A pool's worker writing a file of an interrupted run (its set's temporary folder already
+    removed) fails instead of making the folder again and leaving it behind (a leftover
+    ``.run.partial-...`` after a SIGTERM in the stress series); other missing folders are made."""
+    import threading
+
+    out = tmp_path / "run"
+    started, removed = threading.Event(), threading.Event()
+    errors: list[BaseException] = []
+
+    def late_writer(folder: Path) -> None:
+        started.set()
+        removed.wait(10)
+        try:
+            bio.write_text(folder / "images" / "late.txt", "x")
+        except BaseException as exc:  # noqa: BLE001 - what the writer saw
+            errors.append(exc)
+
+    with pytest.raises(KeyboardInterrupt), output_set(out, {"command": "test"}) as tmp:
+        worker = threading.Thread(target=late_writer, args=(tmp,))
+        worker.start()
+        started.wait(10)
+        raise KeyboardInterrupt
+    removed.set()
+    worker.join(10)
+    assert errors and "removed" in str(errors[0]), errors
+    assert _temporaries(tmp_path) == [] and not out.exists()
+    bio.write_text(tmp_path / "new" / "deep" / "f.txt", "y")
+    assert (tmp_path / "new" / "deep" / "f.txt").read_text() == "y"

@@ -211,6 +211,12 @@ BAD = {
     "QE above 1": (
         lambda r: [[a, b / 10.0 if b else 0.0, c, d] for a, b, c, d in r], HEADER, "quantum efficiency"
     ),
+    # issue 32: accepted before, and fitted into nonsense
+    "lit mean below the dark level": (lambda r: [*r[:3], [1e-3, r[3][1], 9.0, r[3][3]], *r[4:]], HEADER,
+                                      "row 4: mean_dn = 9 below its dark level 10 DN"),
+    "exposure 0 on every row": (lambda r: [[0.0, *x[1:]] for x in r], HEADER, "row 1: exposure_s = 0"),
+    "milliseconds written as seconds": (lambda r: [[20.0, *x[1:]] for x in r], HEADER,
+                                        "exposure_s = 20.0: expected about 1e-06..1 s"),
 }
 
 
@@ -224,6 +230,33 @@ def test_bad_tables_are_one_line_exit_2_and_write_nothing(case: str, tmp_path: P
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and needle in lines[0], res.output
     assert not out.exists()
+
+
+def test_ms_written_as_seconds_gets_a_guess(tmp_path: Path) -> None:
+    table = _csv(tmp_path / "t.csv", [[20.0, *x[1:]] for x in _rows()])
+    res = runner.invoke(app, ["calibrate", str(table), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2 and "did you mean 20e-3?" in res.output, res.output
+
+
+def test_calibration_json_is_strict_json_for_a_single_exposure_table(tmp_path: Path) -> None:
+    """One exposure time: the dark current and its error are undefined. They were written as
+    ``NaN`` tokens (not JSON); now ``null``, and every file parses with a strict parser."""
+    table = _csv(tmp_path / "t.csv", _rows())
+    calibrate(table, tmp_path / "out", chain=False)
+
+    def refuse(token: str) -> None:
+        raise ValueError(f"non-standard JSON token {token}")
+
+    data = json.loads((tmp_path / "out" / "calibration.json").read_text(), parse_constant=refuse)
+    assert None in _leaves(data)
+
+
+def _leaves(value: object) -> list[object]:
+    if isinstance(value, dict):
+        return [x for v in value.values() for x in _leaves(v)]
+    if isinstance(value, list):
+        return [x for v in value for x in _leaves(v)]
+    return [value]
 
 
 def test_public_api_and_bad_stages(tmp_path: Path) -> None:

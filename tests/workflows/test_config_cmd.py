@@ -62,3 +62,68 @@ def test_init_refuses_a_folder_that_is_not_empty(tmp_path: Path) -> None:
     f.write_text("x")
     r = runner.invoke(app, ["init", str(f)])
     assert r.exit_code == 2 and "is a file" in r.stderr
+
+
+def test_init_fills_an_empty_folder_in_place_with_the_umask(tmp_path: Path) -> None:
+    """An existing empty folder is filled, not replaced (same inode, its own mode), and what
+    init makes follows the umask (before: the package's modes and a 0700 folder)."""
+    import os
+    import stat
+
+    target = tmp_path / "mine"
+    target.mkdir()
+    target.chmod(0o750)
+    inode = target.stat().st_ino
+    old = os.umask(0o077)
+    try:
+        r = runner.invoke(app, ["init", str(target)])
+        assert r.exit_code == 0, r.stderr
+        new = tmp_path / "new"
+        assert runner.invoke(app, ["init", str(new)]).exit_code == 0
+    finally:
+        os.umask(old)
+    assert target.stat().st_ino == inode and stat.S_IMODE(target.stat().st_mode) == 0o750
+    made = [new, *new.rglob("*"), *target.rglob("*")]
+    modes = {p.relative_to(tmp_path): stat.S_IMODE(p.stat().st_mode) for p in made}
+    assert all(m == (0o700 if (tmp_path / p).is_dir() else 0o600) for p, m in modes.items()), modes
+
+
+def test_init_refuses_a_read_only_empty_folder_and_keeps_it(tmp_path: Path, monkeypatch) -> None:
+    """A read-only empty folder is refused and left as it is (before: removed and replaced)."""
+    import os
+
+    target = tmp_path / "ro"
+    target.mkdir()
+    target.chmod(0o555)
+    inode = target.stat().st_ino
+    real_access = os.access
+    # as root every folder is writable: say what a user without the permission gets
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: (
+        False if Path(p) == target and mode & os.W_OK else real_access(p, mode, **kw)))
+    r = runner.invoke(app, ["init", str(target)])
+    assert r.exit_code == 2 and "cannot be written" in r.stderr and len(r.stderr.splitlines()) == 1
+    assert target.stat().st_ino == inode and not any(target.iterdir())
+    target.chmod(0o755)
+
+
+def test_init_on_a_full_disk_is_one_short_line(tmp_path: Path, monkeypatch) -> None:
+    """No room: one line naming the file and the reason (before: shutil's 4 KB list of every
+    file), nothing left behind."""
+    import errno
+    import shutil
+
+    real_copy = shutil.copyfile
+    calls = []
+
+    def full(src, dst, *args, **kwargs):
+        calls.append(dst)
+        if len(calls) > 3:
+            raise OSError(errno.ENOSPC, "No space left on device", str(dst))
+        return real_copy(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(shutil, "copyfile", full)
+    r = runner.invoke(app, ["init", str(tmp_path / "start")])
+    assert r.exit_code == 2, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and "No space left on device" in lines[0] and len(lines[0]) < 400, lines
+    assert list(tmp_path.iterdir()) == []

@@ -170,6 +170,28 @@ def test_records_and_dataset_json_are_strict_json(fixed):
     assert rec["split"] in ("train", "val", "test")
 
 
+def test_a_damaged_chunk_names_the_sample_the_variable_and_the_file(fixed, tmp_path):
+    """A chunk file overwritten with noise: ``iter_batches`` and ``iter_samples`` name the
+    sample, the variable and the file, and say how to remake it (before: zstd's own error)."""
+    import shutil
+
+    copy = tmp_path / "ds"
+    shutil.copytree(fixed, copy)
+    chunk = copy / "data.zarr" / "gamma_hdr" / "c" / "3" / "0" / "0"
+    assert chunk.is_file()
+    chunk.write_bytes(np.random.default_rng(0).bytes(64))
+    pattern = (r"sample 3, variable 'gamma_hdr': cannot read .*data.zarr/gamma_hdr/c/3/0/0 \(.*\): a damaged "
+               r"file; remake the sample with 'bench-sim dataset SPEC --out .* --only 3'")
+    with pytest.raises(BenchSimError, match=pattern):
+        for _ in bench_sim.dataset.iter_batches(copy, batch_size=4, shuffle=False):
+            pass
+    with pytest.raises(BenchSimError, match=pattern):
+        for _ in bench_sim.dataset.iter_samples(copy, variables=["gamma_hdr"]):
+            pass
+    first = next(bench_sim.dataset.iter_batches(copy, batch_size=3, shuffle=False, fields=["gamma_hdr"]))
+    assert list(first["sample"]) == [0, 1, 2]  # the other samples read as before
+
+
 def test_torch_dataset_or_a_one_line_refusal(fixed):
     try:
         import torch

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from bench_sim.errors import BenchSimError
-from bench_sim.workflows.dataset.reader import DATA_STORE, complete_samples, read_info
+from bench_sim.workflows.dataset.reader import DATA_STORE, complete_samples, read_info, read_sample_array
 from bench_sim.workflows.dataset.splits import DEFAULT_SPLITS, split_indices
 
 __all__ = ["SplitSamples", "iter_batches", "torch_dataset", "split_samples"]
@@ -97,9 +97,12 @@ class SplitSamples:
         return self._group
 
     def read(self, index: int) -> dict[str, np.ndarray]:
-        """The fields of sample ``index`` (a dataset index, not a position in the split)."""
+        """The fields of sample ``index`` (a dataset index, not a position in the split).
+
+        A chunk that cannot be read (a damaged file) is one line naming the sample, the
+        variable and the chunk's file (:class:`~bench_sim.errors.BenchSimError`)."""
         group = self._store()
-        return {f: np.asarray(group[f][int(index)]) for f in self.fields}
+        return {f: read_sample_array(group, self.folder, f, int(index)) for f in self.fields}
 
     def __getitem__(self, j: int) -> dict[str, Any]:
         i = self.indices[j]

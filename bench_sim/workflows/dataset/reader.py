@@ -57,6 +57,7 @@ if TYPE_CHECKING:
 __all__ = [
     "open",
     "iter_samples",
+    "read_sample_array",
     "Sample",
     "DATA_STORE",
     "DATASET_JSON",
@@ -282,6 +283,30 @@ def iter_samples(
     units = {v: schema[v]["units"] for v in names}
     for i in done:
         rec = records[i]
-        arrays = {v: np.asarray(group[v][i]) for v in names}
+        arrays = {v: read_sample_array(group, folder, v, i) for v in names}
         yield Sample(i, stages, arrays, dict(rec.get("values", {})), dict(rec.get("metrics", {})), units)
 
+
+def _damaged(folder: Path, arr: Any, name: str, index: int, exc: Exception) -> str:
+    """The one line of a sample's chunk that cannot be read: sample, variable, file, remedy."""
+    where = folder / DATA_STORE / name
+    try:  # the file of the sample's (first) chunk, e.g. data.zarr/gamma_hdr/c/3/0/0
+        coords = (index // arr.chunks[0], *(0 for _ in arr.chunks[1:]))
+        where = where / arr.metadata.chunk_key_encoding.encode_chunk_key(coords)
+    except (AttributeError, TypeError, IndexError):  # a store of another layout: its folder
+        pass
+    detail = " ".join(str(exc).split())[:160] or type(exc).__name__
+    return (
+        f"sample {index}, variable {name!r}: cannot read {where} ({type(exc).__name__}: {detail}): a "
+        f"damaged file; remake the sample with 'bench-sim dataset SPEC --out {folder} --only {index}'"
+    )
+
+
+def read_sample_array(group: Any, folder: Path, name: str, index: int) -> np.ndarray:
+    """Variable ``name`` of sample ``index`` from the dataset's open Zarr ``group``; a chunk
+    that cannot be read (a damaged file) is one :class:`~bench_sim.errors.BenchSimError` line
+    naming the sample, the variable, the chunk's file and how to remake it."""
+    try:
+        return np.asarray(group[name][int(index)])
+    except Exception as exc:  # zarr and its codecs raise many kinds for a damaged chunk
+        raise BenchSimError(_damaged(folder, group[name], name, int(index), exc)) from None

@@ -47,6 +47,7 @@ from bench_sim.config import BenchConfig, config_sha256
 from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import check_free_space, format_bytes, write_json
 from bench_sim.io.folder_lock import folder_lock
+from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.io.ownership import entries
 from bench_sim.metrics.fusion_truth import LIGHT_RATIO_TOLERANCE
 from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
@@ -408,30 +409,33 @@ def _plan_and_run(
     # the execution layer first: a scheduler that cannot be reached (or a cluster that cannot
     # start) is refused before anything is laid out at --out
     cluster = open_client(workers=workers, scheduler=scheduler) if plan.todo else contextlib.nullcontext()
-    with cluster as client:
-        if plan.action == "create":
-            lay_out(spec, out)
-        meta = manifest_meta(spec)
-        (out / COMPLETION_RECORD).unlink(missing_ok=True)  # rewritten last if the dataset completes
-        if not plan.todo:
-            run.complete = len(plan.done_before)
-        else:
-            try:
+    laid_out = False
+    try:
+        with cluster as client:
+            if plan.action == "create":
+                lay_out(spec, out)
+            laid_out = True
+            meta = manifest_meta(spec)
+            (out / COMPLETION_RECORD).unlink(missing_ok=True)  # rewritten last if the dataset completes
+            if not plan.todo:
+                run.complete = len(plan.done_before)
+            else:
                 writer = _run_samples(plan, client, meta, progress)
-            except BaseException as exc:
-                done = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
-                note_kept(exc, f"{done} of {spec.samples} samples complete are kept in {out}; finish with "
-                               f"'bench-sim dataset {spec_path} --out {out} --resume'")
-                raise
-            run.ran, run.failed = writer.ran, writer.failed
-            run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
-    df = write_manifest(out, spec, meta, plan.values)
-    write_card(out, spec, df, command=command, provenance=meta)
-    if run.complete == spec.samples:
-        write_json(out / COMPLETION_RECORD, {
-            "command": "dataset", "version": meta["version"], "seed": spec.seed,
-            "spec_sha256": meta["spec_sha256"], "samples": spec.samples, "files": entries(out),
-        })
+                run.ran, run.failed = writer.ran, writer.failed
+                run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
+        df = write_manifest(out, spec, meta, plan.values)
+        write_card(out, spec, df, command=command, provenance=meta)
+        if run.complete == spec.samples:
+            write_json(out / COMPLETION_RECORD, {
+                "command": "dataset", "version": meta["version"], "seed": spec.seed,
+                "spec_sha256": meta["spec_sha256"], "samples": spec.samples, "files": entries(out),
+            })
+    except BaseException as exc:
+        if laid_out:  # while the samples run, the cluster closes or the manifest and card are written
+            done = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
+            note_kept(exc, f"{done} of {spec.samples} samples complete are kept in {out}; finish with "
+                           f"'bench-sim dataset {spec_path} --out {out} --resume'")
+        raise
     return run
 
 
@@ -466,8 +470,9 @@ class _SampleWriter:
         }
         if outcome.ok:
             value: SampleOutput = outcome.value
-            for name, arr in value.arrays.items():
-                self.group[name][i] = np.asarray(arr, dtype=self.group[name].dtype)
+            with deferred_interrupts():  # Zarr writes on its own thread: never cut (docs/reliability.md)
+                for name, arr in value.arrays.items():
+                    self.group[name][i] = np.asarray(arr, dtype=self.group[name].dtype)
             rec.update(status="complete", metrics=value.metrics, **value.info)
         else:
             rec.update(status="failed", error=outcome.error)

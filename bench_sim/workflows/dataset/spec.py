@@ -45,7 +45,6 @@ the key, the value and what is allowed.
 
 from __future__ import annotations
 
-import glob as _glob
 import hashlib
 import json
 import os
@@ -68,6 +67,7 @@ from bench_sim.config import (
 )
 from bench_sim.errors import BenchSimError
 from bench_sim.io import sha256_file
+from bench_sim.io.glob_walk import bounded_glob
 from bench_sim.runtime.execution import task_seed_sequence
 from bench_sim.sensor.dtdi import check_stages
 from bench_sim.workflows.dataset.distributions import DIST_MODELS, DISTRIBUTIONS, Distribution, Glob, Strict
@@ -237,11 +237,10 @@ class DatasetSpec:
 def _resolve_glob(path: Path, key: str, dist: Glob) -> Glob:
     pattern = Path(dist.pattern)
     full = str(pattern if pattern.is_absolute() else path.parent / pattern)
-    hits = sorted(p for p in _glob.glob(full, recursive=True) if Path(p).is_file())
+    where = f"{path}: randomize.{key}.pattern = {dist.pattern!r}"
+    hits = sorted(p for p in bounded_glob(full, where) if Path(p).is_file())  # a bounded walk
     if not hits:
-        raise BenchSimError(
-            f"{path}: randomize.{key}.pattern = {dist.pattern!r}: matches no file (relative to {path.parent})"
-        )
+        raise BenchSimError(f"{where}: matches no file (relative to {path.parent})")
     rel = tuple(h if pattern.is_absolute() else os.path.relpath(h, path.parent) for h in hits)
     return dist.model_copy(update={"files": rel})
 

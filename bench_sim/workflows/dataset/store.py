@@ -23,7 +23,9 @@ import numpy as np
 from bench_sim.config import config_sha256, config_to_toml_text
 from bench_sim.errors import BenchSimError
 from bench_sim.io import atomic_path, check_output_dir, umask, write_csv, write_json
+from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.io.ownership import entries, refuse_foreign, remove_listed
+from bench_sim.io.strict_json import strict_dumps
 from bench_sim.pipeline import (
     COORD_ATTRS,
     IMAGE_DIMS,
@@ -216,7 +218,7 @@ def _write_skeleton(spec: DatasetSpec, folder: Path) -> None:
     if spec.fused:
         ds.attrs.update(mu1=int(base.fusion.mu1), mu2=int(base.fusion.mu2))
     encoding = {name: {"chunks": tuple(v["chunks"])} for name, v in schema["variables"].items()}
-    with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
+    with warnings.catch_warnings(), deferred_interrupts():  # consolidated: a Zarr v3 extension; never cut
         warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
         ds.to_zarr(folder / DATA_STORE, mode="w-", zarr_format=3, consolidated=True, compute=False,
                    encoding=encoding)
@@ -351,7 +353,7 @@ def write_manifest(
 
     df = manifest_frame(spec, read_records(out), values)
     table = pa.Table.from_pandas(df, preserve_index=False)
-    provenance = json.dumps(meta, sort_keys=True, default=str).encode()
+    provenance = strict_dumps(meta, sort_keys=True, default=str).encode()
     table = table.replace_schema_metadata({**(table.schema.metadata or {}), b"bench_sim": provenance})
     with atomic_path(out / MANIFEST_PARQUET) as tmp:
         pq.write_table(table, tmp)

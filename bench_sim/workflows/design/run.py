@@ -369,21 +369,24 @@ def run_design(
         n_workers = _workers(plan, workers, scheduler)
         _preflight(plan, n_workers, scheduler)
         records: dict[int, dict[str, Any]] = dict(plan.done)
-        with open_client(workers=n_workers, scheduler=scheduler) as client:
-            sessions = _open_folder(plan, n_workers, scheduler)
-            try:
+        opened = False
+        try:
+            with open_client(workers=n_workers, scheduler=scheduler) as client:
+                sessions = _open_folder(plan, n_workers, scheduler)
+                opened = True
                 if plan.todo:
                     _run_points(plan, client, records, progress)
                 for i in sorted(records) if on_point is not None else ():
                     on_point(records[i])  # type: ignore[misc]
                 table, choice = _judge(plan, records)
                 chain = _run_chain(plan, client, table, choice, records, progress) if len(table) else {}
-            except BaseException as exc:
+            failed = _write_outputs(plan, table, choice, records, chain, sessions, plots)
+        except BaseException as exc:
+            if opened:  # while the points run, the cluster closes or the outputs are written
                 ok = sum(1 for r in records.values() if r["status"] == "ok")
                 note_kept(exc, f"{ok} of {len(plan.tasks)} points finished are kept in {plan.out}; finish "
                                f"with 'bench-sim design {spec_path} --out {plan.out} --resume'")
-                raise
-        failed = _write_outputs(plan, table, choice, records, chain, sessions, plots)
+            raise
     best = table.row(choice.recommended) if choice.recommended is not None else None
     if progress:
         what = (f"recommended {best['stages']} ({best['rule']}, {best['beta_bits']}-bit)" if best

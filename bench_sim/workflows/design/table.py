@@ -15,7 +15,6 @@ every column a variable with ``units`` and ``long_name``) hold the same table.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -26,7 +25,8 @@ import numpy as np
 
 from bench_sim.config import config_to_toml_text
 from bench_sim.io import atomic_path, write_csv, write_json
-from bench_sim.io.strict_json import strict_json
+from bench_sim.io.interrupts import deferred_interrupts
+from bench_sim.io.strict_json import strict_dumps, strict_json
 from bench_sim.measure.design_scores import SCORE_COLUMNS
 from bench_sim.version import __version__
 from bench_sim.workflows.design.objectives import OBJECTIVES, Choice, choose
@@ -159,7 +159,7 @@ def _key_column(values: np.ndarray) -> np.ndarray:
     vals = list(values)
     if all(isinstance(v, int | float) and not isinstance(v, bool) for v in vals):
         return np.asarray(vals, dtype=np.float64)
-    return np.asarray([json.dumps(v) if isinstance(v, list | dict) else str(v) for v in vals])
+    return np.asarray([strict_dumps(v) if isinstance(v, list | dict) else str(v) for v in vals])
 
 
 def _cell(v: Any) -> Any:
@@ -203,12 +203,14 @@ def write_tables(out: Path, table: DesignTable, spec: DesignSpec, meta: Mapping[
         title=f"bench_sim design {spec.name}",
         seed=int(spec.seed),
         noise=spec.noise,
-        spec=json.dumps(spec.as_dict(), default=str),
+        spec=strict_dumps(spec.as_dict(), default=str),
         design_sha256=str(meta.get("design_sha256")),
         base_config=config_to_toml_text(spec.base),
         version=__version__,
     )
-    with atomic_path(out / "design.nc") as tmp:
+    # never cut by Ctrl-C: xarray's and HDF5's locks an interruption leaves held would deadlock
+    # the store's own close (as for sweep.nc), and HDF5 can swallow the signal
+    with deferred_interrupts(), atomic_path(out / "design.nc") as tmp:
         ds.to_netcdf(tmp)
     return ["candidates.csv", "candidates.csv.json", "design.nc"]
 

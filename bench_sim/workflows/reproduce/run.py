@@ -77,7 +77,7 @@ from bench_sim.workflows.reproduce.result import (
     Table1Result,
     TruthResult,
 )
-from bench_sim.workflows.reproduce.seeds import headline_numbers, seed_spread
+from bench_sim.workflows.reproduce.seeds import check_seeds, headline_numbers, seed_spread
 from bench_sim.workflows.reproduce.stage_mtf import measure_stage_mtf, sharpness_result, write_stage_mtf
 from bench_sim.workflows.reproduce.truth_figures import write_truth_figures
 from bench_sim.workflows.reproduce.writing import snr_figure, start_image_files
@@ -338,11 +338,10 @@ def run_reproduce(
     headline numbers also over seeds ``seed .. seed + seeds - 1`` as mean +- sd (the files are
     seed ``seed``'s)."""
     seed = check_seed(seed)
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise BenchSimError(f"--seeds = {seeds!r}: must be an integer >= 1")
     if quick:
         cfg = quick_config(cfg)
     stages, fig3 = _stages(cfg)
+    seeds = check_seeds(seed, seeds, cfg, stages)
     check_reproducible(cfg)
     out = preflight(cfg, out=out, estimate=estimate_reproduce(cfg, stages))
     t_start = time.perf_counter()

@@ -1,5 +1,10 @@
 """``reproduce --seeds N``: the headline numbers over ``N`` seeds as mean +- standard deviation.
 
+:func:`check_seeds` refuses, before any work, a count above :data:`MAX_SEEDS` (with the time it
+would take, :func:`seconds_per_seed`) and a last seed ``seed + N - 1`` outside the seed rule
+(:func:`bench_sim.workflows.preflight.is_seed`); a run estimated above :data:`LONG_RUN_S` is
+warned about with its estimate.
+
 Seed ``s`` of ``seed .. seed + N - 1`` draws a new sensor (fixed patterns) and new temporal noise
 (and, with the reference engine, new render noise); the bench, the target and the lights are the
 same. :func:`headline_numbers` picks the run's headline numbers out of ``metrics.json``'s dict,
@@ -11,12 +16,28 @@ pattern count as noise) are labelled as such.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
+from bench_sim.config import BenchConfig
+from bench_sim.errors import BenchSimError
 from bench_sim.io import markdown_table
+from bench_sim.workflows.preflight import SEED_MAX, SEED_RULE, is_seed
 
-__all__ = ["headline_numbers", "seed_spread", "spread_section", "HEADLINES"]
+__all__ = [
+    "headline_numbers", "seed_spread", "spread_section", "check_seeds", "seconds_per_seed", "HEADLINES",
+    "MAX_SEEDS", "PIXEL_READS_PER_S", "LONG_RUN_S",
+]
+
+#: Most seeds one ``reproduce --seeds`` runs (more: several runs with their own ``--seed``)
+MAX_SEEDS = 1000
+#: Pixel reads per second of a further seed's pass, fusion, chain DR and metrics, for the time
+#: estimate: about what 2 cores do (measured: the paper rig's 115 M reads in about 13 s a seed,
+#: the quick preset's 18 M in about 1.1 s)
+PIXEL_READS_PER_S = 1e7
+#: Estimated run time [s] above which ``--seeds`` is warned about
+LONG_RUN_S = 600.0
 
 #: headline number -> (path in metrics.json's dict, label in the report)
 HEADLINES: dict[str, tuple[tuple[str, ...], str]] = {
@@ -84,3 +105,46 @@ def spread_section(spread: dict[str, dict[str, Any]], seeds: Sequence[int]) -> l
         *markdown_table(["headline number", "mean +- sd", "seeds"], rows),
         "",
     ]
+
+
+def seconds_per_seed(cfg: BenchConfig, stages: Sequence[int]) -> float:
+    """Estimated time [s] of one further seed: its pass's pixel reads (``lines + max(stages) - 1``
+    line periods of ``max(stages)`` rows of ``columns`` pixels) at :data:`PIXEL_READS_PER_S`."""
+    top = max(int(m) for m in stages)
+    return (cfg.lines + top - 1) * top * cfg.sensor.columns / PIXEL_READS_PER_S
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``12 min``, ``3.5 h``, ``9 days``, ``2.1e+05 years``."""
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.0f} s"
+
+
+def check_seeds(seed: int, seeds: object, cfg: BenchConfig, stages: Sequence[int]) -> int:
+    """``--seeds`` checked before any work: an integer in ``1..MAX_SEEDS`` whose last seed
+    ``seed + seeds - 1`` is a root seed; a run estimated above :data:`LONG_RUN_S` is warned
+    about. Raises :class:`~bench_sim.errors.BenchSimError` (one line) otherwise."""
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise BenchSimError(f"--seeds = {seeds!r}: must be an integer >= 1")
+    each = seconds_per_seed(cfg, stages)
+    if seeds > MAX_SEEDS:
+        raise BenchSimError(
+            f"--seeds = {seeds}: more than {MAX_SEEDS} seeds (each reruns the pass, the fusion and the "
+            f"chain DR, about {_duration(each)} each for this config: {_duration(each * (seeds - 1))} in "
+            "all); run fewer, or several runs each with its own --seed"
+        )
+    last = seed + seeds - 1
+    if not is_seed(last):  # the seed rule, on the last seed run
+        raise BenchSimError(
+            f"--seed = {seed}, --seeds = {seeds}: the last seed, {last}, must be {SEED_RULE} (seeds are "
+            f"stored as signed 64-bit integers); give --seed <= {SEED_MAX - seeds + 1}"
+        )
+    if each * (seeds - 1) > LONG_RUN_S:
+        warnings.warn(
+            f"bench_sim: --seeds = {seeds}: about {_duration(each * (seeds - 1))} for the {seeds - 1} "
+            f"further seeds (about {_duration(each)} each)",
+            UserWarning, stacklevel=2,
+        )
+    return seeds

@@ -18,6 +18,8 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+from bench_sim.io.interrupts import deferred_interrupts
+
 __all__ = ["IMAGES_DIR", "point_store", "write_point_images"]
 
 #: folder of the point stores in the sweep folder
@@ -38,7 +40,8 @@ def write_point_images(images_dir: str | Path, index: int, ds: Any) -> Path:
     out = ds.copy()
     out.attrs["point"] = int(index)
     try:
-        with warnings.catch_warnings():  # consolidated metadata is a Zarr v3 extension
+        # never cut by Ctrl-C: Zarr writes on its own thread (it would go on after tmp is removed)
+        with warnings.catch_warnings(), deferred_interrupts():  # consolidated: a Zarr v3 extension
             warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
             out.to_zarr(tmp, mode="w", zarr_format=3, consolidated=True)
         shutil.rmtree(final, ignore_errors=True)

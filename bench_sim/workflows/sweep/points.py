@@ -20,7 +20,6 @@ The value helpers (numbers, labels, units of a key) serve the plots and the repo
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ import numpy as np
 
 from bench_sim.config import config_to_toml_text
 from bench_sim.io import write_csv, write_json
-from bench_sim.io.strict_json import strict_json
+from bench_sim.io.strict_json import strict_dumps, strict_json
 from bench_sim.version import __version__
 from bench_sim.workflows.output_meta import provenance, store_attrs
 from bench_sim.workflows.sweep.plan import SweepPlan, column_docs
@@ -61,7 +60,7 @@ def _cell(v: Any) -> Any:
     if v is None:
         return ""
     if isinstance(v, list | dict):
-        return json.dumps(v)
+        return strict_dumps(v)
     if isinstance(v, bool):
         return "true" if v else "false"
     return v
@@ -118,7 +117,7 @@ def value_label(v: Any) -> str:
     if isinstance(v, float):
         return f"{v:.4g}"
     if isinstance(v, list):
-        return json.dumps(v)
+        return strict_dumps(v)
     return str(v)
 
 
@@ -197,10 +196,10 @@ def to_dataset(
         mode=spec.mode,
         noise=spec.noise,
         seed=int(spec.seed),
-        spec=json.dumps(spec.as_dict(), default=str),
+        spec=strict_dumps(spec.as_dict(), default=str),
         spec_sha256=plan.sha256,
         base_config=config_to_toml_text(spec.base),
-        sessions=json.dumps(list(sessions)),
+        sessions=strict_dumps(list(sessions)),
         version=__version__,
         **store_attrs(spec.base, covers=[p.cfg for p in spec.points]),  # sensor_chain, truth_exact
     )

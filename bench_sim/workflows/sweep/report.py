@@ -22,6 +22,7 @@ import numpy as np
 
 from bench_sim.config import config_sha256
 from bench_sim.io import atomic_path, markdown_table, write_text
+from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.version import __version__
 from bench_sim.workflows.sweep.bands import write_points_images
 from bench_sim.workflows.sweep.plan import IMAGES, SweepPlan, column_docs
@@ -264,7 +265,9 @@ def write_outputs(out: Path, plan: SweepPlan, records: Mapping[int, Mapping[str,
     if plan.spec.keep_images:
         files.append("images/ (one point_NNNNNN.zarr per point: its stage images, truth and Gamma_HDR)")
     ds = to_dataset(plan, records, sessions)
-    with atomic_path(out / "sweep.nc") as tmp:
+    # never cut by Ctrl-C: xarray's and HDF5's locks an interruption leaves held would deadlock
+    # the store's own close (a hang found by scripts/ctrl_c_stress.py), and HDF5 can swallow it
+    with deferred_interrupts(), atomic_path(out / "sweep.nc") as tmp:
         ds.to_netcdf(tmp)
     meta = csv_meta(plan)
     meta.pop("units", None)

@@ -51,6 +51,7 @@ from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import OUTPUT_MARKER, write_json
 from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries, listed_files, remove_listed
+from bench_sim.io.strict_json import strict_json
 from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.workflows.output_meta import provenance
@@ -110,9 +111,10 @@ def _value_of(cfg: BenchConfig, key: str) -> Any:
 
 
 def _record(plan: SweepPlan, task: PointTask, outcome: TaskOutcome) -> dict[str, Any]:
-    """The journal record of a finished point."""
+    """The journal record of a finished point, as strict JSON holds it (a non-finite metric, e.g.
+    the SNR of a noise-free patch, is ``None``): the same in memory as read back on ``--resume``."""
     point = plan.spec.points[task.index]
-    return {
+    return strict_json({
         "point": task.index,
         "values": {k: _value_of(point.cfg, k) for k in plan.spec.keys},
         "varied": point.varied,
@@ -125,7 +127,7 @@ def _record(plan: SweepPlan, task: PointTask, outcome: TaskOutcome) -> dict[str,
         "wall_s": outcome.wall_s,
         "worker": outcome.worker,
         "metrics": outcome.value if outcome.ok else {},
-    }
+    })
 
 
 def _meta(
@@ -245,24 +247,28 @@ def _run_and_write(
     lost cluster) says what is kept and how to resume."""
     todo = plan.todo
     records: dict[int, dict[str, Any]] = {}
+    opened = False
     # the cluster is reached (or started) before anything is written: an unreachable scheduler
     # leaves no output behind
-    with open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext() as client:
-        sessions, records = _open_folder(plan, workers, scheduler)
-        try:
+    cluster = open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext()
+    try:
+        with cluster as client:
+            sessions, records = _open_folder(plan, workers, scheduler)
+            opened = True
             if todo:
                 _run_points(plan, client, records, progress, on_point)
-        except BaseException as exc:
+        totals = _totals(plan, records)
+        write_outputs(plan.out, plan, records, sessions, plots=plots)
+        write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
+                                                  "complete_with_failures", sessions, totals))
+        write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals,
+                                              "files": entries(plan.out)})
+    except BaseException as exc:
+        if opened:  # while the points run, the cluster closes or the outputs are written
             ok = sum(1 for r in records.values() if r["status"] == "ok")
             note_kept(exc, f"{ok} of {len(plan.tasks)} points finished are kept in {plan.out}; finish with "
                            f"'bench-sim sweep {spec_path} --out {plan.out} --resume'")
-            raise
-    totals = _totals(plan, records)
-    write_outputs(plan.out, plan, records, sessions, plots=plots)
-    write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
-                                              "complete_with_failures", sessions, totals))
-    write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals,
-                                          "files": entries(plan.out)})
+        raise
     return records
 
 

@@ -75,6 +75,7 @@ from bench_sim.config import (
     with_overrides,
 )
 from bench_sim.errors import BenchSimError
+from bench_sim.io.input_files import input_file_problem
 from bench_sim.sensor.effects.chain import effect_kinds
 from bench_sim.workflows.preflight import SEED_RULE, is_seed
 from bench_sim.workflows.sweep.light_keys import LIGHTING_KEYS, adds_light, check_banding_stages, check_ratio
@@ -349,8 +350,9 @@ def _cell(text: str) -> Any:
 
 def _custom_points(spec: Path, table: str) -> tuple[tuple[str, ...], list[dict[str, Any]]]:
     path = (spec.parent / table).resolve()
-    if not path.is_file():
-        raise _err(spec, f"points = {table!r}: no such file {path}")
+    problem = input_file_problem(path)  # missing, a folder, a FIFO or device (never opened)
+    if problem is not None:
+        raise _err(spec, f"points = {table!r}: {path}: {problem}")
     try:
         with path.open(newline="", encoding="utf-8") as fh:  # counted before the rows are kept
             count = sum(1 for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")) - 1
