@@ -3,7 +3,7 @@
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup reproduce sweep-example test test-fast docs-test docs-reference install-check lint bench clean
+.PHONY: setup reproduce sweep-example test test-fast test-stress docs-test docs-reference install-check lint bench clean
 
 .setup-stamp: pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -44,6 +44,12 @@ docs-reference: setup
 # The physics tier alone: closed forms, invariants and seeded statistical tests, on every core
 test-fast: setup
 	$(PY) -m pytest -n auto --dist loadfile --strict-skips -m "physics and not slow"
+
+# The full signal stress series (issue 32): 50 Ctrl-C / SIGTERM at random moments of each long
+# command with two CPU burners running, one command at a time (about 35 minutes on 2 cores; make
+# test runs a reduced series of 2 signals per command)
+test-stress: setup
+	$(PY) -m pytest --strict-skips -m stress -v
 
 # `pip install .` into a fresh venv, then `bench-sim reproduce --quick` from another folder
 install-check:

@@ -285,3 +285,16 @@ def test_signals_at_random_moments_under_load(capsys: pytest.CaptureFixture[str]
     report = capsys.readouterr().out
     assert status == 0, report
     assert report.count("2 of 2 runs stopped cleanly") == len(ctrl_c_stress.COMMANDS), report
+
+
+@pytest.mark.slow
+@pytest.mark.stress
+@pytest.mark.parametrize("command", sorted(ctrl_c_stress.COMMANDS))
+def test_fifty_signals_at_random_moments_under_load(command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """The full series of point 2 for one command: 50 signals (SIGINT and SIGTERM in turn) at
+    uniformly random moments of its run, two CPU burners running; every run stops cleanly.
+    ``make test-stress`` (about 7 minutes per command on 2 cores; ``make test`` deselects it)."""
+    status = ctrl_c_stress.main(["-n", "50", "--burn", "2", "--seed", "32", "--commands", command])
+    report = capsys.readouterr().out
+    assert status == 0, report
+    assert "50 of 50 runs stopped cleanly" in report, report
