@@ -245,12 +245,14 @@ def test_ctrl_c_after_the_points_still_says_what_is_kept(
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("command", ["sweep", "design"])
 def test_a_signal_during_the_netcdf_write_is_held_until_it_ends(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: str
 ) -> None:
-    """SIGTERM as ``sweep.nc`` starts to be written: the write completes (whole and readable)
-    and the signal is delivered just after it. Cut inside xarray and HDF5, it left their locks
-    held, and the store's own close then waited for ever (the hang the stress series found)."""
+    """SIGTERM as ``sweep.nc`` (``design.nc``) starts to be written: the write completes (whole
+    and readable) and the signal is delivered just after it. Cut inside xarray and HDF5, it left
+    their locks held, and the store's own close then waited for ever (the hang the stress series
+    found)."""
     import xarray as xr
     from typer.testing import CliRunner
 
@@ -265,12 +267,18 @@ def test_a_signal_during_the_netcdf_write_is_held_until_it_ends(
     monkeypatch.setattr(xr.Dataset, "to_netcdf", signalled)
     ctrl_c_stress.write_specs(tmp_path)
     out = tmp_path / "out"
-    res = CliRunner().invoke(app, ["sweep", str(tmp_path / "sweep.toml"), "--out", str(out),
+    res = CliRunner().invoke(app, [command, str(tmp_path / f"{command}.toml"), "--out", str(out),
                                    "--workers", "0", "--no-plots"])
     assert res.exit_code == 143, res.output
-    assert _lines(res.stderr)[-1].startswith("bench-sim: terminated: stopped by SIGTERM; 4 of 4 points")
-    with xr.open_dataset(out / "sweep.nc") as ds:  # the 2 x 2 grid of the spec, whole
-        assert dict(ds.sizes) == {"lights.strong.irradiance_w_m2": 2, "lights.weak.irradiance_w_m2": 2}
+    last = _lines(res.stderr)[-1]
+    assert last.startswith("bench-sim: terminated: stopped by SIGTERM;"), last
+    with xr.open_dataset(out / f"{command}.nc") as ds:  # whole: the spec's grid / every candidate
+        if command == "sweep":
+            assert "4 of 4 points" in last
+            assert dict(ds.sizes) == {"lights.strong.irradiance_w_m2": 2, "lights.weak.irradiance_w_m2": 2}
+        else:
+            assert "2 of 2 points" in last
+            assert ds.sizes["candidate"] == len(ds["rule"]) and set(ds["rule"].values) == {"eq11", "clip"}
 
 
 # --- 4. the stress series, reduced ---------------------------------------------------------------
