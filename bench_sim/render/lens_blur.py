@@ -18,6 +18,7 @@ edge over a few pixels).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 
@@ -45,6 +46,14 @@ class TextureLens:
     def key(self) -> str:
         """What makes the blur of a grid, as text (the texture's shared blocks)."""
         return f"{self.otf.key}|{self.h_y_m:.9g}|{self.h_x_m:.9g}|{self.margin_rows}|{self.margin_cols}"
+
+    @property
+    def exact_key(self) -> str:
+        """:attr:`key` and a digest of the OTF on a probe grid of 64 x 64 frequencies: what makes the
+        blur to the bit (the on-disk texture store, :mod:`bench_sim.render.texture_store`; the
+        key's text rounds the lens' numbers and does not name a spectrum's weights)."""
+        probe = self._transfer((64, 64))
+        return f"{self.key}|{hashlib.sha256(np.ascontiguousarray(probe).tobytes()).hexdigest()}"
 
     def _transfer(self, shape: tuple[int, int]) -> np.ndarray:
         from scipy import fft
