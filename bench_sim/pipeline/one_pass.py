@@ -75,6 +75,15 @@ class PassResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     make_dataset: Callable[[], xr.Dataset] | None = field(default=None, repr=False)
     truth: bool = False
+    #: the arrays behind ``dataset`` (:class:`~bench_sim.sensor.pass_lines.ArraySink`), ``None`` with a sink
+    arrays: ArraySink | None = field(default=None, repr=False)
+
+    def stage_array(self, name: str, stage: int) -> np.ndarray:
+        """Stage variable ``name`` of stage ``stage``: the array behind
+        ``dataset[name].sel(stage=stage)``, read without building the dataset (xarray)."""
+        if self.arrays is None or name not in self.arrays.index or stage not in self.arrays.index[name]:
+            raise BenchSimError(f"PassResult: no {name} of stage {stage}")
+        return self.arrays.arrays[name][self.arrays.index[name][stage]]
 
     @functools.cached_property
     def dataset(self) -> xr.Dataset:
@@ -242,7 +251,7 @@ def run_pass(
         return PassResult({}, setup, timings, None, truth=truth)
     dn = {m: array_sink.arrays["dn"][s] for s, m in enumerate(st)}
     make = functools.partial(_make_dataset, cfg, seed, setup, st, array_sink.arrays, tst)
-    return PassResult(dn, setup, timings, make, truth=truth)
+    return PassResult(dn, setup, timings, make, truth=truth, arrays=array_sink)
 
 
 def _pass_truth(
