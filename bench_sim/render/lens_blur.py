@@ -56,12 +56,10 @@ class TextureLens:
         return f"{self.key}|{hashlib.sha256(np.ascontiguousarray(probe).tobytes()).hexdigest()}"
 
     def _transfer(self, shape: tuple[int, int]) -> np.ndarray:
-        from scipy import fft
-
         got = self._cache.get(shape)
-        if got is None:
-            fy = fft.fftfreq(shape[0], d=self.h_y_m)
-            fx = fft.rfftfreq(shape[1], d=self.h_x_m)
+        if got is None:  # numpy's frequencies (scipy.fft's are these): no scipy import for the key
+            fy = np.fft.fftfreq(shape[0], d=self.h_y_m)
+            fx = np.fft.rfftfreq(shape[1], d=self.h_x_m)
             got = self.otf.grid(fy, fx)
             self._cache[shape] = got
         return got
