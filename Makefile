@@ -25,9 +25,10 @@ lint: setup
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
 
-test: lint
-	$(PY) -m pytest
-	bash scripts/check_install.sh
+# lint, then the suite on every core (pytest-xdist), with the install check running beside them:
+# scripts/test.sh. Arguments for pytest: make test PYTEST_ARGS="-x"
+test: setup
+	bash scripts/test.sh $(PYTEST_ARGS)
 
 # The documentation alone: README length, every link in README.md and docs/, the config reference
 # against the schema, and the tutorials of docs/tutorials/ executed as notebooks (also in `make test`)
@@ -40,9 +41,9 @@ docs-reference: setup
 	p = pathlib.Path('docs/config-reference.md'); t = p.read_text(); \
 	p.write_text(t[:t.index('| key | type |')] + keys_markdown() + '\n')"
 
-# The physics tier alone: closed forms, invariants and seeded statistical tests (under 30 s)
+# The physics tier alone: closed forms, invariants and seeded statistical tests, on every core
 test-fast: setup
-	$(PY) -m pytest -m "physics and not slow"
+	$(PY) -m pytest -n auto --dist loadfile --strict-skips -m "physics and not slow"
 
 # `pip install .` into a fresh venv, then `bench-sim reproduce --quick` from another folder
 install-check:

@@ -8,6 +8,8 @@ The public API:
 
 * :func:`calibrate` - a sensor model fitted to a camera's photon-transfer data or EMVA 1288
   results, and its predicted DTDI dynamic range (:func:`bench_sim.workflows.calibrate.calibrate`);
+* :func:`design` - which stages, fusion rule, word and timing to use for a camera and a scene,
+  every candidate scored on the exact truth (:func:`bench_sim.workflows.design.run.run_design`);
 * :func:`simulate` - any bench to its DTDI stage images with exact ground truth
   (:func:`bench_sim.workflows.simulate.simulate`);
 * :func:`run_pass` - one pass, frames -> sensor -> DTDI -> stage images and their truth
@@ -36,15 +38,17 @@ if TYPE_CHECKING:
     from bench_sim.pipeline import run_pass
     from bench_sim.version import __version__
     from bench_sim.workflows.calibrate import calibrate
+    from bench_sim.workflows.design.run import run_design as design
     from bench_sim.workflows.simulate import simulate
 
-__all__ = ["__version__", "calibrate", "dataset", "load_config", "run_pass", "simulate"]
+__all__ = ["__version__", "calibrate", "dataset", "design", "load_config", "run_pass", "simulate"]
 
 #: public name -> (module, attribute; ``None`` for the module itself)
 PUBLIC: dict[str, tuple[str, str | None]] = {
     "__version__": ("bench_sim.version", "__version__"),
     "calibrate": ("bench_sim.workflows.calibrate", "calibrate"),
     "dataset": ("bench_sim.dataset", None),
+    "design": ("bench_sim.workflows.design.run", "run_design"),
     "load_config": ("bench_sim.config", "load_config"),
     "run_pass": ("bench_sim.pipeline", "run_pass"),
     "simulate": ("bench_sim.workflows.simulate", "simulate"),

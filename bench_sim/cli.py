@@ -47,6 +47,7 @@ from bench_sim.workflows import calibrate as calibrate_workflow
 from bench_sim.workflows import fuse as fuse_workflow
 from bench_sim.workflows import simulate as simulate_workflow
 from bench_sim.workflows.dataset import run as dataset_run
+from bench_sim.workflows.design.command import design_command
 from bench_sim.workflows.reproduce import run as reproduce_run
 from bench_sim.workflows.sweep import export as sweep_export
 from bench_sim.workflows.sweep import run as sweep_run
@@ -465,6 +466,7 @@ def calibrate(
 app.add_typer(config_cmd.config_app, name="config")
 app.command("init")(config_cmd.init_command)
 app.command("mtf")(mtf_cmd.mtf_command)
+app.command("design")(design_command)  # bench-sim design SPEC.toml --out DIR (its arguments live with it)
 
 
 def main() -> None:  # pragma: no cover

@@ -10,6 +10,17 @@ import pytest
 
 from bench_sim.config import BenchConfig, load_config, with_overrides
 
+# a skip fails the session unless listed in tests/allowed_skips.txt (--strict-skips, or CI set)
+from tests.skip_guard import (  # noqa: F401 - pytest's hooks, found by name
+    pytest_addoption,
+    pytest_configure,
+    pytest_make_collect_report,
+    pytest_runtest_makereport,
+)
+
+#: pytest's own plugin for running pytest on generated test files (tests/test_skip_guard.py)
+pytest_plugins = ["pytester"]
+
 # The suite neither reads nor writes the user's on-disk light records
 # (bench_sim.render.record_store), so every test renders what it counts; set at import, so the
 # processes the tests start (commands, Dask workers) inherit it. Tests of the store turn it on

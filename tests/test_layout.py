@@ -230,5 +230,5 @@ def test_public_api() -> None:
         "print(json.dumps([light, sorted(names), *api]))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    public = ["__version__", "calibrate", "dataset", "load_config", "run_pass", "simulate"]
+    public = ["__version__", "calibrate", "dataset", "design", "load_config", "run_pass", "simulate"]
     assert json.loads(out) == [True, public, True, True]

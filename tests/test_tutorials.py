@@ -18,8 +18,8 @@ nbclient = pytest.importorskip("nbclient")
 TUTORIALS = sorted((Path(__file__).resolve().parents[1] / "docs" / "tutorials").glob("[0-9]*.py"))
 
 
-def test_there_are_the_five_tutorials() -> None:
-    assert [p.stem[:2] for p in TUTORIALS] == ["01", "02", "03", "04", "05"]
+def test_there_are_the_six_tutorials() -> None:
+    assert [p.stem[:2] for p in TUTORIALS] == ["01", "02", "03", "04", "05", "06"]
 
 
 @pytest.mark.slow

@@ -67,7 +67,9 @@ from bench_sim.runtime.parallel import child_sequence, chunk_generator, parallel
 from bench_sim.sensor.emva import draw_fixed_pattern
 from bench_sim.sensor.model import (
     full_scale_dn,
+    hdr_dr_model_db,
     stage_clips_on_word,
+    stage_dr_model_db,
     stage_saturation_photons,
     stage_snr1_photons,
 )
@@ -346,7 +348,6 @@ def _image_dr(p: np.ndarray, stats: np.ndarray, saturation: SaturationMethod) ->
 def _model(cfg: BenchConfig, mu1: int, mu2: int, pedestal: float) -> tuple[dict[int, bool], dict[str, float]]:
     """Where each stage clips (on the word, below the pixel's clip, or on the pixel) and the
     sensor model's DR [dB] per image (:mod:`bench_sim.sensor.model`)."""
-    t = cfg.timing.t_int_s
     clips = {
         m: stage_clips_on_word(
             cfg.sensor, m, beta_bits=cfg.dtdi.beta_bits, subtract_black=cfg.dtdi.subtract_black,
@@ -354,12 +355,10 @@ def _model(cfg: BenchConfig, mu1: int, mu2: int, pedestal: float) -> tuple[dict[
         )
         for m in (mu1, mu2)
     }
-    snr1 = {m: stage_snr1_photons(cfg.sensor, t, m) for m in (mu1, mu2)}
-    sat = {m: _stage_sat(cfg, m, pedestal) for m in (mu1, mu2)}
     model = {
-        "gamma1": 20 * np.log10(sat[mu1] / snr1[mu1]),
-        "gamma2": 20 * np.log10(sat[mu2] / snr1[mu2]),
-        "gamma_hdr": 20 * np.log10(sat[mu1] / snr1[mu2]),
+        "gamma1": stage_dr_model_db(cfg, mu1, pedestal),
+        "gamma2": stage_dr_model_db(cfg, mu2, pedestal),
+        "gamma_hdr": hdr_dr_model_db(cfg, mu1, mu2, pedestal),
     }
     return clips, {k: float(v) for k, v in model.items()}
 

@@ -37,7 +37,7 @@ from bench_sim.metrics.fusion_truth import (
 from bench_sim.pipeline import PassResult
 from bench_sim.sensor.model import dark_noise_e, stage_variance_dn2, word_clip_dn
 
-__all__ = ["FusionScores", "fusion_scores", "RULES"]
+__all__ = ["FusionScores", "fusion_scores", "RULES", "clip_margin_dn"]
 
 #: the rules compared: name -> what the report calls it
 RULES = {
@@ -47,7 +47,7 @@ RULES = {
 }
 
 
-def _margin_dn(cfg: BenchConfig, m: int, top_signal_dn: float) -> float:
+def clip_margin_dn(cfg: BenchConfig, m: int, top_signal_dn: float) -> float:
     """:data:`CLIP_MARGIN_SIGMAS` temporal standard deviations [DN] of stage ``m`` at its clip
     (:func:`bench_sim.sensor.model.stage_variance_dn2`): a value this far below the clip is
     clipped in none of its noise draws but a fraction ``~3e-5``."""
@@ -109,7 +109,7 @@ def fusion_scores(cfg: BenchConfig, sim: PassResult, eq11: FusionResult) -> Fusi
     )
     margin_rule = fuse_stages_highest_unsaturated(
         signal, beta=beta, criterion="clip",
-        saturation_dn={m: top - off[m] - _margin_dn(cfg, m, top - off[m]) for m in (mu1, mu2)},
+        saturation_dn={m: top - off[m] - clip_margin_dn(cfg, m, top - off[m]) for m in (mu1, mu2)},
     )
     truth = true_hdr_dn(cfg, sim.stage_array("linear_dn", mu2))
     photons = {m: sim.stage_array("photons", m) for m in (mu1, mu2)}

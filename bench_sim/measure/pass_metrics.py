@@ -26,6 +26,7 @@ from bench_sim.sensor.model import dark_noise_e, stage_offset_dn, stage_variance
 
 __all__ = [
     "PassMetrics", "pass_metrics", "patch_slices", "spatial_snr", "temporal_snr", "SNR_IN_NOISE", "SNR_ROSE",
+    "stage_temporal_var_dn2",
 ]
 
 #: SNR below which a patch counts as "in the noise", and the Rose criterion for "out of it"
@@ -220,6 +221,18 @@ def pass_metrics(cfg: BenchConfig, sim: PassResult, fused: FusionResult) -> Pass
     return PassMetrics(eq18, sat, dark, bright, qualitative, None, scene_db, captured, clipped)
 
 
+def stage_temporal_var_dn2(cfg: BenchConfig, photons: np.ndarray, m: int, t_int_s: float) -> np.ndarray:
+    """Temporal variance [DN^2] of stage ``m``'s word at the truth's ``photons`` (the sum over its
+    ``m`` rows): ``m`` independent reads of the pixel's mean signal ``eta photons / m``
+    (:func:`bench_sim.sensor.model.stage_variance_dn2`; EMVA 1288 R4 eq. 7 per read), in the
+    linear range."""
+    s = cfg.sensor
+    return stage_variance_dn2(
+        m, s.quantum_efficiency * photons / m, conversion_gain_dn_per_e=s.conversion_gain_dn_per_e,
+        dark_noise_e=dark_noise_e(s, t_int_s), quantization=s.quantization, shot_noise=s.shot_noise,
+    )
+
+
 def temporal_snr(
     cfg: BenchConfig, sim: PassResult, fused: FusionResult, sl: tuple[slice, slice]
 ) -> dict[str, float]:
@@ -236,15 +249,11 @@ def temporal_snr(
     the patch does not clip (the darkest patch).
     """
     s, mu1, mu2 = cfg.sensor, cfg.fusion.mu1, cfg.fusion.mu2
-    sd_dark = dark_noise_e(s, sim.setup.geom.t_int_s)
     sig: dict[int, np.ndarray] = {}
     var: dict[int, np.ndarray] = {}
     for m in (mu1, mu2):
         photons = sim.stage_array("photons", m)[sl]
-        var[m] = stage_variance_dn2(
-            m, s.quantum_efficiency * photons / m, conversion_gain_dn_per_e=s.conversion_gain_dn_per_e,
-            dark_noise_e=sd_dark, quantization=s.quantization, shot_noise=s.shot_noise,
-        )
+        var[m] = stage_temporal_var_dn2(cfg, photons, m, sim.setup.geom.t_int_s)
         sig[m] = sim.stage_array("linear_dn", m)[sl] - stage_offset_dn(s, cfg.dtdi, m)
     low = fused.source[sl] == mu1
     scale = mu2 / mu1

@@ -179,7 +179,9 @@ class PassSharpness:
     rois: list[EdgeROI]
 
 
-def pass_sharpness(read: Read, stages: Sequence[int], has: set[str], cfg: BenchConfig) -> PassSharpness | None:
+def pass_sharpness(
+    read: Read, stages: Sequence[int], has: set[str], cfg: BenchConfig
+) -> PassSharpness | None:
     """The e-SFR of every stage and of ``gamma_hdr`` in both directions (module docstring) of a
     pass's variables ``has`` read by ``read``; ``None`` when its reflectance (of the first stage)
     holds no whole dark square."""
@@ -204,8 +206,8 @@ def add_sharpness(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     """
     import xarray as xr
 
-    got = pass_sharpness(_dataset_reader(ds), [int(v) for v in ds.stage.values], {str(n) for n in ds.data_vars},
-                         cfg)
+    stages = [int(v) for v in ds.stage.values]
+    got = pass_sharpness(_dataset_reader(ds), stages, {str(n) for n in ds.data_vars}, cfg)
     if got is None:
         return ds
     new: dict[str, xr.DataArray] = {}

@@ -14,8 +14,9 @@ it this module measures:
   track inside the window (the edge of a spot) ``r != 1`` and the branch taken from ``Gamma1``
   is off by the factor ``r`` (relative error ``1/r - 1``), while ``Gamma2`` may already clip
   where ``Gamma1`` says it does not;
-- :func:`illumination_regions`: the pixels under the spot, under the fill and at the spot's edge,
-  from the truth's illumination (photons per unit reflectance) and the light ratio;
+- :func:`illumination_regions`: the pixels under the spot, under the fill (:func:`light_regions`)
+  and at the spot's edge, from the truth's illumination (photons per unit reflectance) and the
+  light ratio; :func:`clip_regions`: where a fusion has to switch, can, or cannot give the truth;
 - :func:`clear_of_clips`: where a stage is clear of its clips (every clip, pixel, ADC or word,
   takes less from its expectation than from a normal read :data:`CLIP_MARGIN_SIGMAS` standard
   deviations below a clip), and :func:`clip_flags` of two fused stages.
@@ -42,6 +43,9 @@ __all__ = [
     "from_clipped_stage",
     "tdi_light_ratio",
     "illumination_regions",
+    "light_regions",
+    "clip_regions",
+    "TRUTH_REGIONS",
     "LIGHT_RATIO_TOLERANCE",
     "CLIP_MARGIN_SIGMAS",
     "clip_shortfall",
@@ -51,6 +55,9 @@ __all__ = [
 
 #: |r - 1| above which the TDI window's light counts as changing (the spot's edge)
 LIGHT_RATIO_TOLERANCE = 0.05
+#: The regions a fusion is scored over against its truth: :func:`illumination_regions`, then
+#: :func:`clip_regions`
+TRUTH_REGIONS = ("whole", "spot", "fill", "spot_edge", "clipped", "recoverable", "lost")
 
 
 def relative_error(hdr: ArrayLike, truth: ArrayLike, floor: float = 1.0) -> np.ndarray:
@@ -111,33 +118,52 @@ def tdi_light_ratio(photons_mu1: ArrayLike, photons_mu2: ArrayLike, mu1: int, mu
     return out
 
 
+def light_regions(
+    photons: ArrayLike, reflectance: ArrayLike, min_reflectance: float = 0.02
+) -> dict[str, np.ndarray]:
+    """Boolean maps ``whole``, ``spot`` and ``fill`` of a stage image from its truth's light.
+
+    The illumination is ``E = photons / reflectance`` (photons per unit reflectance of the stage
+    pixel, where the reflectance exceeds ``min_reflectance``). ``spot`` is where ``E`` exceeds the
+    geometric mean of the fill (its 10th percentile) and the peak (its 99.5th percentile), when
+    the peak is at least 1.5 times the fill; ``fill`` the rest of the lit pixels.
+    """
+    p = np.asarray(photons, dtype=np.float64)
+    rho = np.asarray(reflectance, dtype=np.float64)
+    lit = rho > min_reflectance
+    whole = np.ones(p.shape, dtype=bool)
+    if not lit.any():
+        empty = np.zeros(p.shape, dtype=bool)
+        return {"whole": whole, "spot": empty, "fill": empty.copy()}
+    e = np.full(p.shape, np.nan)
+    np.divide(p, rho, out=e, where=lit)
+    fill_level, peak = np.percentile(e[lit], [10.0, 99.5])
+    split = np.sqrt(max(fill_level, 1e-300) * peak)
+    spot = lit & (e > split) if peak > 1.5 * fill_level else np.zeros(p.shape, dtype=bool)
+    return {"whole": whole, "spot": spot, "fill": lit & ~spot}
+
+
 def illumination_regions(
     photons: ArrayLike, reflectance: ArrayLike, ratio: ArrayLike, tolerance: float = LIGHT_RATIO_TOLERANCE,
     min_reflectance: float = 0.02,
 ) -> dict[str, np.ndarray]:
-    """Boolean maps ``whole``, ``spot``, ``fill`` and ``spot_edge`` of the image.
-
-    The illumination is ``E = photons / reflectance`` (photons per unit reflectance of the stage
-    pixel, where the reflectance exceeds ``min_reflectance``). ``spot`` is where ``E`` exceeds the
-    geometric mean of the fill (its 10th percentile) and the peak (its 99.5th percentile), ``fill``
-    the rest; ``spot_edge`` is where the TDI window's light ratio leaves ``1 +- tolerance``
+    """Boolean maps ``whole``, ``spot``, ``fill`` (:func:`light_regions`) and ``spot_edge`` of the
+    image: ``spot_edge`` is where the TDI window's light ratio leaves ``1 +- tolerance``
     (:func:`tdi_light_ratio`), whatever the level.
     """
-    p = np.asarray(photons, dtype=np.float64)
-    rho = np.asarray(reflectance, dtype=np.float64)
     r = np.asarray(ratio, dtype=np.float64)
-    lit = rho > min_reflectance
-    e = np.full(p.shape, np.nan)
-    np.divide(p, rho, out=e, where=lit)
-    whole = np.ones(p.shape, dtype=bool)
-    if not lit.any():
-        empty = np.zeros(p.shape, dtype=bool)
-        return {"whole": whole, "spot": empty, "fill": empty.copy(), "spot_edge": empty.copy()}
-    fill_level, peak = np.percentile(e[lit], [10.0, 99.5])
-    split = np.sqrt(max(fill_level, 1e-300) * peak)
-    spot = lit & (e > split) if peak > 1.5 * fill_level else np.zeros(p.shape, dtype=bool)
     edge = np.isfinite(r) & (np.abs(r - 1.0) > tolerance)
-    return {"whole": whole, "spot": spot, "fill": lit & ~spot, "spot_edge": edge}
+    return {**light_regions(photons, reflectance, min_reflectance), "spot_edge": edge}
+
+
+def clip_regions(flags: ArrayLike) -> dict[str, np.ndarray]:
+    """Boolean maps ``clipped``, ``recoverable`` and ``lost`` of a fused image from its
+    :func:`clip_flags` (``stage_clip_flags``): ``clipped`` where some fused stage is not clear of
+    its clips and some is (where a fusion has to switch, and can err), ``recoverable`` where some
+    stage is clear (``flags < 3``), ``lost`` where none is (no fusion of the words gives the truth)."""
+    f = np.asarray(flags)
+    ok = f < 3
+    return {"clipped": (f > 0) & ok, "recoverable": ok, "lost": f == 3}
 
 
 #: The margin below a clip [standard deviations of the temporal noise] at which a stage counts as

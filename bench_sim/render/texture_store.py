@@ -86,7 +86,8 @@ def load(key: str, shape: tuple[int, int]) -> np.ndarray | None:
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"][()]))
             values = z["values"]
-        if meta != {"key": key, "versions": versions()} or values.dtype != np.float32 or values.shape != shape:
+        same = meta == {"key": key, "versions": versions()}
+        if not same or values.dtype != np.float32 or values.shape != shape:
             raise ValueError("another block")
     except Exception:
         with contextlib.suppress(OSError):

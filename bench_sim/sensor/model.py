@@ -56,6 +56,7 @@ __all__ = [
     "photons_at_snr1",
     "stage_snr1_photons",
     "stage_dr_model_db",
+    "hdr_dr_model_db",
 ]
 
 #: Variance of the uniform quantisation error of an ideal ADC, ``sigma_q**2 = 1/12`` DN^2
@@ -290,7 +291,7 @@ def stage_saturation_photons(
     t_int_s: float,
     stage: int,
     *,
-    beta_bits: int,
+    beta_bits: int | None,
     subtract_black: bool = True,
     pedestal_dn: float = 0.0,
 ) -> float:
@@ -300,8 +301,12 @@ def stage_saturation_photons(
     ``(2**beta - 1 - P - m b [not subtract_black]) / (m K)`` electrons per read, less the dark
     electrons, divided by ``eta``. This is where the linear response meets the clipped
     plateau; the variance maximum (EMVA 1288's saturation point) lies a few per cent below.
+    ``beta_bits = None``: a word that never clips (the pixel's clip alone).
     """
-    e_word = _word_electrons_per_read(sensor, stage, beta_bits, subtract_black, pedestal_dn)
+    e_word = (
+        math.inf if beta_bits is None
+        else _word_electrons_per_read(sensor, stage, beta_bits, subtract_black, pedestal_dn)
+    )
     e_sat = min(pixel_saturation_electrons(sensor), e_word) - dark_electrons(sensor, t_int_s)
     return max(e_sat, 1e-6) / sensor.quantum_efficiency
 
@@ -355,3 +360,39 @@ def stage_dr_model_db(cfg: BenchConfig, stage: int, pedestal_dn: float | None = 
         pedestal_dn=ped,
     )
     return 20.0 * math.log10(sat / stage_snr1_photons(cfg.sensor, t, stage))
+
+
+def hdr_dr_model_db(
+    cfg: BenchConfig, mu_low: int, mu_high: int, pedestal_dn: float | None = None,
+    beta_bits: int | None | str = "config",
+) -> float:
+    """Model dynamic range of a fusion of stages ``mu_low < ... < mu_high`` [dB] (eq. 11 and the
+    clip-aware rules alike): ``20 lg(mu_p.sat(mu_low) / mu_p.min(mu_high))``, the fused image
+    saturating where its lowest stage does (:func:`stage_saturation_photons`) and reaching
+    SNR = 1 where its highest stage does (:func:`stage_snr1_photons`), in photons per pixel per
+    frame.
+
+    Parameters
+    ----------
+    cfg
+        The bench (sensor, integration time, word, offsets).
+    mu_low, mu_high
+        The lowest and the highest fused stage.
+    pedestal_dn
+        The words' pedestal [DN] (default ``dtdi.pedestal_dn``).
+    beta_bits
+        The output word [bits] (default ``"config"``: ``dtdi.beta_bits``; ``None``: a word that
+        never clips, the DR the pixel allows).
+
+    References
+    ----------
+    The reproduced paper, eq. 11 and 15; EMVA 1288 R4, section 2.3 (SNR = 1) and 3 (saturation).
+    """
+    t = cfg.timing.t_int_s
+    ped = cfg.dtdi.pedestal_dn if pedestal_dn is None else pedestal_dn
+    beta = cfg.dtdi.beta_bits if beta_bits == "config" else beta_bits
+    sat = stage_saturation_photons(
+        cfg.sensor, t, mu_low, beta_bits=beta,  # type: ignore[arg-type]
+        subtract_black=cfg.dtdi.subtract_black, pedestal_dn=ped,
+    )
+    return 20.0 * math.log10(sat / stage_snr1_photons(cfg.sensor, t, mu_high))

@@ -5,7 +5,7 @@ finding the settings and starting one's own bench from the shipped examples.
 type, unit, default, allowed range, typical range, description), as text or as the Markdown
 table of ``docs/config-reference.md``. ``config show`` prints a config resolved through its
 ``base`` chain, as the TOML every output carries. ``init`` copies the shipped scenes, scenario
-presets, sweep and dataset specs and example targets (``bench_sim/scenes/``) into a new folder,
+presets, sweep, dataset and design specs and example targets (``bench_sim/scenes/``) into a new folder,
 keeping their layout so the relative paths inside them (``base = "../paper_rig.toml"``, the
 dataset's image glob) still work.
 """
@@ -184,7 +184,7 @@ def config_show_command(
 def init_command(
     folder: Annotated[Path, typer.Argument(help="new (or empty) folder for the example configs")],
 ) -> None:
-    """Copy the example scenes, scenario presets, sweep and dataset specs and targets to start from."""
+    """Copy the example scenes, scenario presets, sweep, dataset and design specs and targets."""
     written = init_folder(folder)
     configs = ", ".join(str(p) for p in written if p.suffix == ".toml")
     print(f"wrote {len(written)} files to {folder}/: {configs}")

@@ -38,6 +38,7 @@ __all__ = [
     "target_memory",
     "estimate_render",
     "estimate_simulate",
+    "estimate_design",
     "estimate_reproduce",
     "estimate_ptc",
     "estimate_area_ptc",
@@ -189,6 +190,19 @@ def estimate_simulate(cfg: BenchConfig, stages: Iterable[int], fmt: str | None =
     disk = {"stage images and truth": n_pix * stored,
             "hdr and maps": cfg.lines * cfg.sensor.columns * image_stored}
     return ResourceEstimate("simulate", mem, disk, _hint(cfg, f"the stages ({len(st)})"))
+
+
+def estimate_design(cfg: BenchConfig, stages: Iterable[int]) -> ResourceEstimate:
+    """One point of ``bench-sim design``: a pass with its truth at ``stages`` kept in memory
+    (:func:`estimate_simulate`), and the candidates' arrays over those stages (float64 signals,
+    truth, light per row, the word's, the clip flags and regions:
+    :mod:`bench_sim.measure.design_scores`, two words' worth at once)."""
+    st = sorted(int(m) for m in stages)
+    est = estimate_simulate(cfg, st)
+    n_pix = len(st) * cfg.lines * cfg.sensor.columns
+    mem = dict(est.memory_bytes)
+    mem[f"candidate arrays ({len(st)} stages x {cfg.lines} x {cfg.sensor.columns})"] = n_pix * (5 * 8 + 10)
+    return ResourceEstimate("design", mem, {}, est.hint)
 
 
 def estimate_reproduce(cfg: BenchConfig, stages: Iterable[int]) -> ResourceEstimate:

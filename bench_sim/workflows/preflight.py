@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any, overload
 
@@ -156,6 +156,7 @@ def preflight_tasks(
     scheduler: str | None,
     disk_bytes: Mapping[str, int],
     hint: str,
+    estimate: Callable[[BenchConfig, Sequence[int]], ResourceEstimate] = estimate_simulate,
 ) -> None:
     """Check a run of many simulation passes (sweep points, data-set samples) before any runs.
 
@@ -165,9 +166,10 @@ def preflight_tasks(
     machines run them) must fit in the memory available, and ``disk_bytes`` on the disk of
     ``out``; the target image and the backend (forced or chosen) are checked on the largest
     task's config (the backend only for local workers). The output folder itself is the
-    caller's to check (resumable runs reuse theirs).
+    caller's to check (resumable runs reuse theirs). ``estimate``: one task's resources from its
+    config and stages, if a task holds more than one pass (``design``: its candidates' scores).
     """
-    sized = [(estimate_simulate(cfg, stages), cfg) for cfg, stages in tasks]
+    sized = [(estimate(cfg, stages), cfg) for cfg, stages in tasks]
     if not sized:
         return
     task, cfg = max(sized, key=lambda e: e[0].memory_total)

@@ -38,6 +38,7 @@ def dr16() -> ChainDR:
     return measure_chain_dynamic_range(_cfg(beta_bits=16), 16)
 
 
+@pytest.mark.physics
 def test_word_limited_gain_over_gamma2_is_eq15_by_construction(dr12: ChainDR) -> None:
     """beta = 12: both stages clip on the word, so HDR - Gamma2 is 20 lg(mu2/mu1) by
     construction: the HDR is Gamma2 at the dark end (same SNR = 1 point) and Gamma1 x mu2/mu1 at
@@ -56,6 +57,7 @@ def test_word_limited_gain_over_gamma2_is_eq15_by_construction(dr12: ChainDR) ->
     assert img["gamma_hdr"].photons_sat == pytest.approx(img["gamma1"].photons_sat, rel=0.02)
 
 
+@pytest.mark.physics
 def test_gain_over_gamma1_is_the_read_noise_ratio(dr12: ChainDR) -> None:
     """Over Gamma1 the HDR gains only at the dark end: the read noise of the digital sum grows as
     sqrt(m), so about 10 lg(mu2/mu1) = 9 dB, and it agrees with the sensor model's prediction."""
@@ -75,6 +77,7 @@ def test_gain_over_gamma1_is_the_read_noise_ratio(dr12: ChainDR) -> None:
         assert dr12.model_dr_db[name] - 1.0 < img.dr_db < img.dr_db_extrapolated, name
 
 
+@pytest.mark.physics
 def test_pixel_limited_gain_shrinks(dr16: ChainDR) -> None:
     """beta = 16: stage 10 clips on the pixel, not the word; the gain over Gamma2 is the ratio of
     the two clips (model), about 1.5 dB, not eq. 15's 18 dB, and not 'by construction'. With
@@ -93,6 +96,7 @@ def test_pixel_limited_gain_shrinks(dr16: ChainDR) -> None:
     assert dr16.dr_db["gamma2"] > dr16.dr_db["gamma1"]
 
 
+@pytest.mark.physics
 def test_hdr_monotonic_noise_off() -> None:
     """Noise off: Gamma_HDR grows with the scene signal, equals gamma2's signal where that is
     unsaturated, and reaches (mu2/mu1) x gamma1's signal range."""
@@ -122,6 +126,7 @@ def test_hdr_monotonic_noise_off() -> None:
     assert hdr_a.max() == 8 * (4095 - ped)
 
 
+@pytest.mark.physics
 def test_hdr_monotonic_averaged_with_noise(dr12: ChainDR) -> None:
     """With all noise on, the level means of Gamma_HDR rise with the signal (to 4 standard errors)."""
     n_pix = dr12.lines * dr12.columns * 2
@@ -131,6 +136,7 @@ def test_hdr_monotonic_averaged_with_noise(dr12: ChainDR) -> None:
     assert hdr.mean_dn[-1] > 7 * 4095 * 0.9  # reaches the extended range
 
 
+@pytest.mark.physics
 def test_measurement_pedestal_keeps_the_dark_value_unclipped() -> None:
     """With no configured pedestal the measurement raises it to 5 sigma of stage 80's dark
     spread: none of the dark stage values is stored as 0; without it about half would be."""
@@ -147,6 +153,7 @@ def test_measurement_pedestal_keeps_the_dark_value_unclipped() -> None:
     assert measurement_pedestal_dn(CFG, (MU1, MU2)) == CFG.dtdi.pedestal_dn == 64
 
 
+@pytest.mark.physics
 def test_gain_without_black_subtraction() -> None:
     """subtract_black off (stage m carries m x black): the offsets differ per stage and are
     removed; stage 80's accumulated black takes word range, so the gain over Gamma2 exceeds
@@ -175,6 +182,7 @@ def test_measure_chain_dynamic_range_is_deterministic_for_any_thread_count(monke
     assert a["images"]["gamma2"]["mean_dn"] != c["images"]["gamma2"]["mean_dn"]
 
 
+@pytest.mark.physics
 def test_variance_max_saturation_is_located_accurately() -> None:
     """A coarse grid (12 levels over 3 decades, ~5 dB apart) refined twice finds Gamma2's
     variance maximum where a dense 0.5 %-step scan (another seed) finds it, to the scatter of

@@ -24,7 +24,7 @@ def _metrics(cfg, seed=3):
     return pass_metrics(cfg, sim, fused)
 
 
-@pytest.mark.slow
+@pytest.mark.physics
 @pytest.mark.parametrize(("aim_x_m", "dark_half"), [(-0.0155, "right"), (0.0155, "left")])
 def test_darkest_and_brightest_patches_follow_the_light(aim_x_m: float, dark_half: str) -> None:
     """The spot lights one half of the wedge: the darkest patch is the 2 % step of the other
@@ -42,7 +42,6 @@ def test_darkest_and_brightest_patches_follow_the_light(aim_x_m: float, dark_hal
     assert pm.no_patches is None
 
 
-@pytest.mark.slow
 def test_a_target_without_wedge_says_so_instead_of_failing() -> None:
     pm = _metrics(tiny_cfg(lines=48, target={"layout": "uniform"}))
     assert pm.darkest_patch is None and pm.brightest_patch is None and pm.qualitative is None
@@ -51,7 +50,7 @@ def test_a_target_without_wedge_says_so_instead_of_failing() -> None:
     assert math.isfinite(pm.eq18.omega_hdr)
 
 
-@pytest.mark.slow
+@pytest.mark.physics
 def test_temporal_snr_from_the_truth_matches_repeated_exposures() -> None:
     """The darkest patch's temporal SNR from the truth (closed-form variance of each pixel's stage
     word) against the noise measured over repeated exposures of the same scene by the same

@@ -75,6 +75,7 @@ def ptc_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, Bench
     return out, res, cfg
 
 
+@pytest.mark.physics
 def test_ptc_recovers_gain_and_dark_noise_within_3_percent(ptc_run) -> None:
     """Must show 6: K and the dark temporal noise (e- per stage: sqrt(m) x the pixel's
     sqrt(read^2 + dark)) from the photon-transfer analysis of the stage images."""
@@ -191,6 +192,7 @@ def test_beta_above_16_is_refused_before_writing(tmp_path: Path) -> None:
         run_ptc(small_cfg(), [1], 0, tmp_path / "file")
 
 
+@pytest.mark.physics
 def test_subtract_black_off_keeps_the_accumulated_offset(tmp_path: Path) -> None:
     """subtract_black off: stage m's dark level is m x black + the configured pedestal, and the
     analysis (dark-subtracted) still recovers K."""
@@ -205,6 +207,7 @@ def test_subtract_black_off_keeps_the_accumulated_offset(tmp_path: Path) -> None
         assert r["dark"]["mean_dn"] == pytest.approx(offset + dark_e, abs=1.0)
 
 
+@pytest.mark.physics
 def test_measurement_raises_a_too_small_pedestal(tmp_path: Path) -> None:
     """A configured pedestal of 0 is raised to 5 sigma of the highest stage's dark spread, so
     the dark pair has no value clipped at 0 DN."""
@@ -215,6 +218,7 @@ def test_measurement_raises_a_too_small_pedestal(tmp_path: Path) -> None:
     assert dark.min() > 0
 
 
+@pytest.mark.physics
 def test_ptc_recovers_dsnu_and_prnu_of_the_sensor(ptc_run) -> None:
     """DSNU and PRNU from the EMVA 1288 spatial stacks of each stage: equal to those of this
     physical sensor (its fixed pattern, drawn first from the run's seed, summed over the stage's
@@ -260,6 +264,7 @@ def test_ptc_recovers_dsnu_and_prnu_of_the_sensor(ptc_run) -> None:
         assert abs(r["spatial"]["prnu"] / r["expected"]["prnu"] - 1) < spread, m
 
 
+@pytest.mark.physics
 def test_emva1288_reference_package_reads_the_descriptor_files(ptc_run) -> None:
     """The EMVA 1288 reference implementation (the ``emva1288`` package) reads ptc's descriptor
     files and agrees with bench_sim's own analysis and with the config on K, the dark noise and

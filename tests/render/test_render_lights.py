@@ -44,6 +44,7 @@ def test_light_power_change_reuses_records_and_equals_a_fresh_render():
     np.testing.assert_allclose(tripled, fresh, rtol=1e-6, atol=1e-6 * scale)
 
 
+@pytest.mark.physics
 def test_flicker_weights_scale_each_light_per_frame(monkeypatch):
     """With per-frame weights ``w_l(k)`` (flicker), frame ``k`` is ``sum_l w_l(k) P_l(k)``, where
     ``P_l`` are the frames under light ``l`` alone (the other light at zero power) -- and no
@@ -76,6 +77,7 @@ def test_geometry_or_light_placement_change_renders_again(change):
     assert setup.info["mitsuba_renders"] == 2  # positions and the spot (the fill: closed form)
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("lens", ["thinlens", "perspective"])
 def test_fill_records_in_closed_form_equal_a_mitsuba_render(monkeypatch, lens):
     """A fill (uniform sky) on the analytic drum: its records are the fill's radiance L per unit

@@ -31,6 +31,7 @@ def _shift_mismatch(ph: np.ndarray, rows: range) -> float:
     return float(np.abs(a - b).mean() / b.mean())
 
 
+@pytest.mark.physics
 def test_rows_see_the_same_line_one_frame_later_only_in_sync():
     """With sync_error = 0 the surface image moves exactly one row per line period near the
     optical axis: the mismatch between row i+1 of frame k+1 and row i of frame k is no larger
@@ -48,6 +49,7 @@ def test_rows_see_the_same_line_one_frame_later_only_in_sync():
     assert _shift_mismatch(off, rows) > 4 * noise
 
 
+@pytest.mark.physics
 def test_fast_and_reference_engines_agree_within_two_percent():
     """On the bar groups (the hardest region: sharp edges moving along the track). The reference
     needs many samples per pixel to resolve them (at 64 spp its own noise is ~2.3 %), so it runs
@@ -108,6 +110,7 @@ def test_fast_engine_refuses_glossy_print_and_indirect_light():
     assert np.isfinite(ph).all() and ph.max() > 0
 
 
+@pytest.mark.physics
 def test_mesh_drum_matches_analytic_cylinder():
     """The trimesh drum (2048 facets, smooth normals, caps, axle, mounts, bench) renders the same
     target as the analytic cylinder; the bench below shades a little of the fill."""
@@ -116,6 +119,7 @@ def test_mesh_drum_matches_analytic_cylinder():
     assert np.abs(a - m).mean() / a.mean() < 0.02
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("smear_texels", [4.0, 2.37, 0.6])
 def test_smear_filter_is_the_box_integral_of_the_linear_interpolant(smear_texels):
     """``smear_filter`` = (1/S) * integral_0^S A(y + s) ds of the piecewise-linear interpolant,

@@ -23,6 +23,7 @@ def mono():
     return photons
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("engine", ["fast", "reference"])
 def test_narrow_flat_band_reduces_to_mono(mono, engine):
     cfg = tiny_cfg(**FILL_ONLY, render={"spectral": True, "band_m": [549e-9, 551e-9]})
@@ -31,6 +32,7 @@ def test_narrow_flat_band_reduces_to_mono(mono, engine):
     assert np.abs(photons / mono - 1).max() < 0.003
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("spectrum", ["flat", "blackbody"])
 def test_broad_band_follows_the_qe_weighted_closed_form(mono, spectrum):
     """Electrons = integral n_p(lambda) QE(lambda): with the fill's spectrum shape e(lambda)
@@ -49,6 +51,7 @@ def test_broad_band_follows_the_qe_weighted_closed_form(mono, spectrum):
     assert (photons / mono).mean() == pytest.approx(expected, rel=0.005)
 
 
+@pytest.mark.physics
 def test_fast_and_reference_agree_in_spectral_mode():
     cfg = tiny_cfg(render={"spectral": True, "spp": 64})
     fast, _ = render_photons(cfg, 4, np.random.default_rng(1), engine="fast")

@@ -12,6 +12,7 @@ CFG = TargetConfig(panel_lines=512, panel_columns=1024)  # reflectance 0.90 .. 0
 PANEL = make_panel(CFG, circumference_px=4096.0)
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("half", ["left", "right"])
 def test_wedge_has_16_log_spaced_steps_from_90_to_2_percent(half):
     """16 uniform steps stacked along the track: the first at reflectance_max = 0.90, the last at
@@ -42,6 +43,7 @@ def _periods(profile: np.ndarray, step_px: float) -> np.ndarray:
     return np.diff(rising) * step_px
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("along", [False, True], ids=["across", "along"])
 def test_bar_groups_have_the_specified_periods_and_contrast(along):
     """Bar groups of periods 2, 3, 4, 6, 8, 12, 16 object pixels, across the track ("vbars") and

@@ -58,6 +58,7 @@ def test_every_file_kind_reads_as_linear_values(tmp_path, name, dtype):
     np.testing.assert_allclose(vals, want, atol=1e-6)
 
 
+@pytest.mark.physics
 def test_srgb_decoding_and_rec709_luminance(tmp_path):
     # sRGB 188/255 is ~50 % linear; pure green carries 0.7152 of the luminance
     rgb = np.zeros((4, 6, 3), dtype=np.uint8)

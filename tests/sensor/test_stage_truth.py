@@ -30,6 +30,7 @@ def _push_all(sums: StageSums, quantities: list[np.ndarray], sizes: list[int]) -
     return {m: np.concatenate(b, axis=1) for m, b in got.items()}
 
 
+@pytest.mark.physics
 def test_stage_sums_of_a_linear_field_are_the_closed_form():
     """``v[k, i] = a k + b i``: ``sum_{i<m} v[j + i, i] = a (m j + m(m-1)/2) + b m(m-1)/2``, every
     line ``j`` that ``K`` frames complete (``K - m + 1`` lines per stage)."""
@@ -81,6 +82,7 @@ def _reflectance_by_definition(values, q, fp, m, line0, line1, row0):
     return out / m
 
 
+@pytest.mark.physics
 def test_reflectance_of_all_stages_at_once_matches_each_stage_alone(tiny_footprints):
     """:func:`stages_reflectance` (projected across first, grown row by row) equals the
     definition evaluated row by row for every stage, up to float rounding."""
@@ -94,6 +96,7 @@ def test_reflectance_of_all_stages_at_once_matches_each_stage_alone(tiny_footpri
         np.testing.assert_allclose(fast[s], direct, rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.physics
 def test_reflectance_of_a_uniform_texture_is_its_value(tiny_footprints):
     """Footprint weights sum to 1: a uniform texture of 0.37 gives 0.37 at every stage."""
     cfg, setup, fp = tiny_footprints
@@ -124,6 +127,7 @@ def test_read_cumulants_into_out_and_clipped_sum_mean_in_any_block_size(monkeypa
     assert clipped_sum_mean(*sums, 60.0, 7000.0).tobytes() == whole.tobytes()
 
 
+@pytest.mark.physics
 def test_clipped_sum_mean_far_from_both_clips_is_the_mean():
     """More than 12 sd from both clips the shortfalls are below float64's resolution: ``E = k1``
     exactly, as the full expansion gives it there; a sum at the top clip's level loses about

@@ -9,6 +9,7 @@ from typer.testing import CliRunner
 from bench_sim.cli import app
 from bench_sim.config import SCENES_DIR, config_sha256, load_config
 from bench_sim.workflows.dataset import spec as dataset_spec
+from bench_sim.workflows.design import spec as design_spec
 from bench_sim.workflows.sweep import spec as sweep_spec
 
 runner = CliRunner()
@@ -47,6 +48,8 @@ def test_init_copies_the_examples_and_their_relative_paths_work(tmp_path: Path) 
     sweep_spec.load_spec(start / "sweeps" / "light_ratio_beta.toml")
     ds = dataset_spec.load_spec(start / "datasets" / "example.toml")
     assert ds is not None
+    design = design_spec.load_design_spec(start / "designs" / "example.toml")
+    assert design.base.name == "paper_rig" and design.reference == (10, 80)
     assert not [p for p in start.parent.iterdir() if p.name.startswith(".")]  # no temporaries left
 
 

@@ -226,6 +226,7 @@ def _fit_sync_error(stage1: np.ndarray, stage_m: np.ndarray, m: int) -> float:
     return float(grid[int(np.argmin([residual(e) for e in grid]))])
 
 
+@pytest.mark.physics
 def test_truth_holds_per_sample(tmp_path):
     """Noise off: ``dn`` is ``mean_dn`` rounded; ``reflectance`` is the drawn uniform reflectance,
     or, for random bars under the fill, carries the drawn sync error: from stage 1 to stage 80

@@ -73,6 +73,7 @@ def test_fuse_happy_path(tmp_path: Path) -> None:
     np.testing.assert_array_equal(read_image(out), expected.hdr.astype(np.float32))
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("pedestal", [0, 64, 300])
 def test_fuse_pedestal_keeps_the_noise_free_response_linear(tmp_path: Path, pedestal: int) -> None:
     """Noise-free words carrying a pedestal P: with ``--pedestal P`` the fused response is

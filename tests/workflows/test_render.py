@@ -82,6 +82,7 @@ def test_doctor_names_variant_and_llvm():
     assert "variant" in res.stdout and "libLLVM" in res.stdout and "mitsuba" in res.stdout
 
 
+@pytest.mark.physics
 def test_render_truth_says_which_stage_it_is_aligned_for(tmp_path):
     """``ground_truth.exr`` is stage 1's; the header, meta.json and the printed line give the shift
     of the other stages' truth, ``e (m - 1) / (2 (1 + e))`` lines, checked against the exact truth's

@@ -115,6 +115,8 @@ def test_images_are_keyed_gamma_hdr_everywhere(quick_runs):
     assert set(details["images"]) == set(details["model_dr_db"]) == {"gamma1", "gamma2", "gamma_hdr"}
 
 
+@pytest.mark.physics
+@pytest.mark.slow
 def test_quick_shows_the_papers_qualitative_result(quick_runs):
     m = json.loads((quick_runs[0] / "metrics.json").read_text())
     bright, dark = m["brightest_patch"], m["darkest_patch"]

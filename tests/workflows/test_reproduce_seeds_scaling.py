@@ -41,6 +41,7 @@ def _spread(tmp_path, lines: int) -> dict:
     return m["spread"]
 
 
+@pytest.mark.physics
 @pytest.mark.slow
 def test_spread_over_seeds_shrinks_as_one_over_sqrt_pixels(tmp_path):
     small, large = _spread(tmp_path, LINES), _spread(tmp_path, LINES * GROWTH)

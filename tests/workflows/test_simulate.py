@@ -38,6 +38,7 @@ def _overrides(**sections):
 # --- must show 1: dn equals mean_dn without noise, with and without sync error -------------------
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("sync_error", [0.0, 0.05])
 @pytest.mark.parametrize("sensor_switches", [NOISE_OFF, TEMPORAL_OFF], ids=["all-off", "fixed-patterns-on"])
 def test_dn_is_mean_dn_without_noise(sync_error, sensor_switches):
@@ -62,6 +63,7 @@ def test_dn_is_mean_dn_without_noise(sync_error, sensor_switches):
 # --- must show 2: the temporal variance of dn - mean_dn per stage ---------------------------------
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize("lit", [True, False], ids=["uniform-fill", "dark"])
 def test_temporal_variance_grows_as_closed_form(lit):
     lights = FILL_ONLY if lit else {"strong": {"enabled": False}, "weak": {"enabled": False}}
@@ -96,6 +98,7 @@ def test_temporal_variance_grows_as_closed_form(lit):
 # --- must show 3: under sync error, truth follows the stage ------------------------------------
 
 
+@pytest.mark.physics
 def test_sync_error_edges_of_dn_and_reflectance_coincide():
     ov = _overrides(
         lines=120,
@@ -246,6 +249,7 @@ def test_truth_stages_outside_the_pass_refused(some, problem):
 # --- must show 4: an image target round-trips ----------------------------------------------------
 
 
+@pytest.mark.physics
 def test_image_target_round_trips(tmp_path):
     """Under the fill alone, ``reflectance`` is the image resampled to the pixel grid and
     ``mean_dn`` is proportional to it (fixed patterns off; the field is narrow: cos^4 ~ 1)."""

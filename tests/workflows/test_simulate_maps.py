@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import bench_sim
 from bench_sim.metrics.fusion_truth import LIGHT_RATIO_TOLERANCE
@@ -28,6 +29,7 @@ def test_maps_are_float32_line_column_maps_with_units():
     assert "gamma_hdr_error" not in bench_sim.simulate(UNIFORM, stages=[2], seed=1)
 
 
+@pytest.mark.physics
 def test_uniform_target_has_light_ratio_one_and_no_error_beyond_noise():
     """Uniform light along the track: every row of the TDI window sees the same light, ``r = 1``
     within :data:`LIGHT_RATIO_TOLERANCE`; nothing clips, so ``gamma_hdr`` is the stage-``mu2``

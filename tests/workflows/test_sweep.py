@@ -409,6 +409,7 @@ def test_a_failed_point_is_recorded_and_the_sweep_goes_on(
 # --- banding measurement -------------------------------------------------------------------------
 
 
+@pytest.mark.physics
 @pytest.mark.parametrize(("f", "period", "n"), [(100.0, 1e-3, 37), (120.0, 1e-4, 400), (9900.0, 1e-4, 250)])
 def test_banding_amplitude_recovers_a_sinusoid_on_any_number_of_lines(
     f: float, period: float, n: int

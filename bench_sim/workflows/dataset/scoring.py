@@ -29,14 +29,14 @@ from typing import Any
 import numpy as np
 
 from bench_sim.errors import BenchSimError
-from bench_sim.metrics.fusion_truth import illumination_regions, relative_error
+from bench_sim.metrics.fusion_truth import TRUTH_REGIONS, clip_regions, illumination_regions, relative_error
 from bench_sim.workflows.dataset.loaders import split_samples
 from bench_sim.workflows.dataset.reader import Sample, iter_samples, read_info
 
 __all__ = ["FusionScore", "score_fusion", "REGIONS"]
 
 #: the regions :func:`score_fusion` reports (module docstring)
-REGIONS = ("whole", "spot", "fill", "spot_edge", "clipped", "recoverable", "lost")
+REGIONS = TRUTH_REGIONS
 #: what :func:`score_fusion` reads of each sample besides what ``fuse`` needs
 _TRUTH = ("true_hdr_dn", "photons", "reflectance", "tdi_light_ratio", "stage_clip_flags", "hdr_recoverable")
 
@@ -71,8 +71,7 @@ def _regions(sample: Sample, mu2_index: int) -> dict[str, np.ndarray]:
     light = illumination_regions(
         a["photons"][mu2_index], a["reflectance"][mu2_index], a["tdi_light_ratio"]
     )
-    flags, ok = a["stage_clip_flags"], a["hdr_recoverable"].astype(bool)
-    return {**light, "clipped": (flags > 0) & ok, "recoverable": ok, "lost": flags == 3}
+    return {**light, **clip_regions(a["stage_clip_flags"])}
 
 
 def score_fusion(

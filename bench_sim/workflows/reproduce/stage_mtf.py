@@ -30,6 +30,7 @@ track in cycles/px, and the same for ``Gamma_HDR`` in the last row, ``stage`` = 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -97,7 +98,8 @@ def noise_free(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
     if "gamma_hdr" in ds:
         mean = ds["mean_dn"]
-        for name, values in _fused_expected(cfg, mean.sel(stage=mu1).values, mean.sel(stage=mu2).values).items():
+        fused = _fused_expected(cfg, mean.sel(stage=mu1).values, mean.sel(stage=mu2).values)
+        for name, values in fused.items():
             out[name] = (ds[name].dims, values, ds[name].attrs)
     return out
 
@@ -128,11 +130,13 @@ class StageMTF:
         return None if hdr is None else _num(hdr[direction].mtf50_cyc_px)
 
 
-def measure_stage_mtf(cfg: BenchConfig, seed: int) -> StageMTF:
+def measure_stage_mtf(cfg: BenchConfig, seed: int, stages: Sequence[int] | None = None) -> StageMTF:
     """The companion pass (module docstring), noise-free (:func:`noise_free`, on the pass's arrays:
-    no dataset is built), with its e-SFR per stage and of ``Gamma_HDR``."""
+    no dataset is built), with its e-SFR per stage and of ``Gamma_HDR``; at ``stages`` and ``mu1``,
+    ``mu2`` if given (``bench-sim design``: every candidate stage), else at :data:`MTF_STAGES`."""
     comp = companion_config(cfg)
-    stages = sorted({m for m in MTF_STAGES if m <= cfg.sensor.rows} | {cfg.fusion.mu1, cfg.fusion.mu2})
+    chosen = MTF_STAGES if stages is None else tuple(stages)
+    stages = sorted({m for m in chosen if m <= cfg.sensor.rows} | {cfg.fusion.mu1, cfg.fusion.mu2})
     rng = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(2)[1])
     sim = run_pass(comp, stages, rng, truth=True)
     assert sim.arrays is not None

@@ -20,8 +20,9 @@ READ_NOISE_RATIO = "ratio of the two stages' read-noise floors"
 
 def pct(x: float | None, decimals: int = 1, sign: bool = False) -> str:
     """``x`` (a fraction) as a percentage with ``decimals`` decimals, more where needed so that a
-    non-zero fraction never reads 0 and one below 1 never reads 100 (up to 6 decimals; beyond:
-    ``<0.000001%`` / ``>99.999999%``). ``None`` or NaN: ``n/a``.
+    non-zero fraction never reads 0 and one below 1 never reads 100 (up to 6 decimals, or
+    ``decimals`` where more are asked; beyond: ``<0.000001%`` / ``>99.999999%``). ``None`` or NaN:
+    ``n/a``.
 
     Parameters
     ----------
@@ -37,7 +38,7 @@ def pct(x: float | None, decimals: int = 1, sign: bool = False) -> str:
     if x in (0, 1):
         return f"{100 * x:.0f}%"
     plus = "+" if sign else ""
-    for d in range(decimals, 7):
+    for d in range(decimals, max(decimals + 1, 7)):
         text = f"{100 * x:{plus}.{d}f}"
         if float(text) != 0 and abs(float(text)) != 100:
             return f"{text}%"

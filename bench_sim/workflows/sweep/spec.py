@@ -89,6 +89,8 @@ __all__ = [
     "parameter_values",
     "key_exists",
     "set_key",
+    "point_combinations",
+    "point_config",
 ]
 
 MODES = ("product", "sequential", "custom")
@@ -416,21 +418,31 @@ def _parameters(spec: Path, tables: list[dict[str, Any]], mode: str) -> dict[str
 Combos = list[tuple[dict[str, Any], str | None]]
 
 
-def _combinations(spec: Path, top: _SpecFile) -> tuple[tuple[str, ...], dict[str, list[Any]], Combos]:
-    """The swept keys, their values and the points as ``(values, varied key)`` of the mode."""
-    if top.mode == "custom":
-        assert top.points is not None  # checked by _SpecFile
-        keys, rows = _custom_points(spec, top.points)
+def point_combinations(
+    spec: Path, mode: str, parameters: list[dict[str, Any]] | None, points: str | None
+) -> tuple[tuple[str, ...], dict[str, list[Any]], Combos]:
+    """The swept keys, their values and the points as ``(values, varied key)`` of a mode
+    (:data:`MODES`): the ``[[parameters]]`` tables, or the CSV file ``points`` (custom mode).
+    Also used by ``bench-sim design`` for its non-stage keys."""
+    if mode == "custom":
+        assert points is not None  # checked by the spec's model
+        keys, rows = _custom_points(spec, points)
         return keys, {k: [row[k] for row in rows] for k in keys}, [(row, None) for row in rows]
-    assert top.parameters is not None  # checked by _SpecFile
-    values = _parameters(spec, top.parameters, top.mode)
+    assert parameters is not None  # checked by the spec's model
+    values = _parameters(spec, parameters, mode)
     keys = tuple(values)
-    if top.mode == "product":
+    if mode == "product":
         grid = itertools.product(*values.values())
         combos: Combos = [(dict(zip(keys, c, strict=True)), None) for c in grid]
     else:
         combos = [({k: v}, k) for k in keys for v in values[k]]
     return keys, values, combos
+
+
+def point_config(spec: Path, base: dict[str, Any], values: dict[str, Any], index: int) -> BenchConfig:
+    """The validated bench config of point ``index``: ``values`` (dotted keys) set on ``base``
+    (a config's TOML dict); a bad value is one line naming the spec, the point and its values."""
+    return _validated(spec, base, values, index)
 
 
 def load_spec(path: str | Path) -> SweepSpec:
@@ -444,7 +456,7 @@ def load_spec(path: str | Path) -> SweepSpec:
     raw = read_toml(spec, label, "a sweep spec")
     top = validate_model(_SpecFile, raw, label, unknown=f"allowed: {', '.join(SPEC_KEYS)}")
     base_cfg = _base_config(spec, top)
-    keys, values, combos = _combinations(spec, top)
+    keys, values, combos = point_combinations(spec, top.mode, top.parameters, top.points)
     for k in keys:
         if not key_exists(base_cfg, k) and not adds_light(base_cfg, k):
             raise _err(spec, f"key {k!r}: not a setting of the bench config (check the section and name)")
