@@ -11,10 +11,14 @@ change of the machine's load hits both sides alike, with the load average:
    listed as such);
 2. ``sweep``: a 6-point light-power sweep at ``--quick`` size on 2 workers (:mod:`bench_sweep`'s
    spec): points per minute and the ratio (target: >= 2x);
-3. ``dataset``: 8 samples of the example spec (:mod:`bench_dataset`'s) on 2 workers: samples per
-   minute and the ratio (target: >= 2x);
+3. ``dataset``: 8 samples of the baseline's example spec (``scenes/datasets/example.toml``; the
+   current one draws scene keys 0.3.0 lacks), each side with its own rig, on 2 workers: samples
+   per minute and the ratio (target: >= 2x);
 4. the sensor + DTDI pass on one thread (:mod:`bench_sensor`'s): pixel-frames per CPU second and
-   the ratio (target: >= 1, 5 % of noise).
+   the ratio (target: >= 1, 5 % of noise);
+5. ``memory`` (this checkout): peak resident memory of ``reproduce`` and of ``simulate`` (its
+   default stages, Zarr) at :data:`MEMORY_LINES` lines of :data:`MEMORY_COLUMNS` columns, and what
+   each line adds (``docs/performance.md`` quotes them).
 
 Usage: python benchmarks/bench_release.py [--repeat 3] [--flow-repeat 2] [--baseline REV]
        [--only reproduce,sweep,dataset,sensor]
@@ -36,7 +40,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from baseline import Side, load_line, median, paired, print_rates, workflow_run  # noqa: E402
-from bench_dataset import _spec as dataset_spec  # noqa: E402
 from bench_sensor import PAPER_STAGES, pass_rate  # noqa: E402
 from bench_sweep import SPEC as SWEEP_SPEC  # noqa: E402
 
@@ -45,7 +48,9 @@ from bench_sim.workflows.dataset.reader import read_records  # noqa: E402
 
 #: 0.3.0 (the release the issue's numbers were measured on)
 BASELINE_0_3_0 = "638a481"
-PARTS = ("reproduce", "sweep", "dataset", "sensor")
+PARTS = ("reproduce", "sweep", "dataset", "sensor", "memory")
+MEMORY_LINES = (1024, 4096)
+MEMORY_COLUMNS = 256
 #: files of ``reproduce`` that hold the run's times (not compared as bytes)
 TIMED_FILES = {"metrics.json", "report.md"}
 
@@ -105,9 +110,17 @@ def reproduce(sides: list[Side], repeat: int, tmp: Path) -> None:
         print("  data files that differ in bytes: " + (", ".join(diff) if diff else "none"))
 
 
+def scenes(side: Side) -> Path:
+    """The side's own scenes folder (each side reads the configs of its own schema)."""
+    return SCENES_DIR if side.tree is None else side.tree / "bench_sim" / "scenes"
+
+
 def sweep(sides: list[Side], repeat: int, tmp: Path, points: int = 6) -> None:
-    spec = tmp / "sweep.toml"
-    spec.write_text(SWEEP_SPEC.format(base=SCENES_DIR / "paper_rig.toml", stop=256.0, points=points))
+    specs = {}
+    for k, side in enumerate(sides):
+        specs[side.name] = tmp / f"sweep_{k}.toml"
+        specs[side.name].write_text(SWEEP_SPEC.format(base=scenes(side) / "paper_rig.toml", stop=256.0,
+                                                      points=points))
     first: dict[str, list[float]] = {s.name: [] for s in sides}
 
     def run(side: Side, i: int) -> tuple[float, float]:
@@ -116,7 +129,8 @@ def sweep(sides: list[Side], repeat: int, tmp: Path, points: int = 6) -> None:
             if ok != points:
                 raise RuntimeError(f"{side.name}: {ok} of {points} points ok")
 
-        return workflow_run(sides, side, i, tmp / "sweep", "sweep", spec, 2, "points", "point", first, check)
+        return workflow_run(sides, side, i, tmp / "sweep", "sweep", specs[side.name], 2, "points", "point",
+                            first, check)
 
     (tmp / "sweep").mkdir()
     print(f"sweep: {points} light powers at --quick size, 2 workers, {repeat} pairs; {load_line()}",
@@ -126,7 +140,15 @@ def sweep(sides: list[Side], repeat: int, tmp: Path, points: int = 6) -> None:
 
 def dataset(sides: list[Side], repeat: int, tmp: Path, samples: int = 8) -> None:
     (tmp / "dataset").mkdir()
-    spec = dataset_spec(tmp / "dataset", samples)
+    # one spec for both sides, the baseline's example (the current one draws scene keys it lacks),
+    # each side with its own rig and targets
+    example = (scenes(sides[-1]) / "datasets" / "example.toml").read_text()
+    specs = {}
+    for k, side in enumerate(sides):
+        text = example.replace('base = "../paper_rig.toml"', f'base = "{scenes(side) / "paper_rig.toml"}"')
+        text = text.replace('pattern = "../targets/*.png"', f'pattern = "{scenes(side) / "targets"}/*.png"')
+        specs[side.name] = tmp / "dataset" / f"spec_{k}.toml"
+        specs[side.name].write_text(text.replace("samples = 16", f"samples = {samples}"))
     first: dict[str, list[float]] = {s.name: [] for s in sides}
 
     def run(side: Side, i: int) -> tuple[float, float]:
@@ -135,6 +157,7 @@ def dataset(sides: list[Side], repeat: int, tmp: Path, samples: int = 8) -> None
             if done != samples:
                 raise RuntimeError(f"{side.name}: {done} of {samples} samples complete")
 
+        spec = specs[side.name]
         return workflow_run(sides, side, i, tmp / "dataset", "dataset", spec, 2, "samples", "sample", first,
                             check)
 
@@ -151,6 +174,24 @@ def sensor(sides: list[Side], repeat: int) -> None:
         print(f"  {side.name:<22} {rates[side.name] / 1e6:6.1f} M pixel-frames per CPU second")
     if len(sides) == 2:
         print(f"  this checkout / baseline: {rates[sides[0].name] / rates[sides[1].name]:.3f} (target >= 1)")
+
+
+def memory(tmp: Path) -> None:
+    print(f"memory: peak resident memory at {MEMORY_COLUMNS} columns (this checkout); {load_line()}")
+    side = Side.current()
+    for command in ("reproduce", "simulate"):
+        peaks = []
+        for lines in MEMORY_LINES:
+            cfg = tmp / f"memory_{lines}.toml"
+            cfg.write_text(f'base = "{SCENES_DIR / "paper_rig.toml"}"\nlines = {lines}\n[sensor]\n'
+                           f"columns = {MEMORY_COLUMNS}\n[target]\npanel_columns = {MEMORY_COLUMNS}\n")
+            out = tmp / f"memory_{command}_{lines}"
+            argv = [sys.executable, "-P", "-m", "bench_sim", command, str(cfg), "--out", str(out)]
+            wall, _, peak = peak_process(argv, side.env(), cwd=tmp)
+            peaks.append(peak)
+            print(f"  {command:<10} {lines:5d} lines: peak {peak:6.0f} MiB ({wall:.1f} s)", flush=True)
+        per_line = (peaks[1] - peaks[0]) * 1024 / (MEMORY_LINES[1] - MEMORY_LINES[0])
+        print(f"  {command:<10} {per_line:.0f} KiB per line")
 
 
 def main() -> None:
@@ -174,6 +215,8 @@ def main() -> None:
                 sweep(sides, a.flow_repeat, tmp)
             elif part == "dataset":
                 dataset(sides, a.flow_repeat, tmp)
+            elif part == "memory":
+                memory(tmp)
             else:
                 sensor(sides, a.repeat)
     finally:
