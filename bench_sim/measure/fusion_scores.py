@@ -100,7 +100,6 @@ def fusion_scores(cfg: BenchConfig, sim: PassResult, eq11: FusionResult) -> Fusi
     noise margin (:data:`CLIP_MARGIN_SIGMAS`): a stage value just below its clip is biased low by
     the draws that clipped, so the plain rule still takes biased values."""
     mu1, mu2, beta = cfg.fusion.mu1, cfg.fusion.mu2, cfg.dtdi.beta_bits
-    ds = sim.dataset
     off = stage_offsets_dn(cfg, (mu1, mu2))
     top = word_clip_dn(beta)
     words = {m: sim.stage_dn[m] for m in (mu1, mu2)}
@@ -112,11 +111,11 @@ def fusion_scores(cfg: BenchConfig, sim: PassResult, eq11: FusionResult) -> Fusi
         signal, beta=beta, criterion="clip",
         saturation_dn={m: top - off[m] - clip_margin_dn(cfg, m, top - off[m]) for m in (mu1, mu2)},
     )
-    truth = true_hdr_dn(cfg, ds["linear_dn"].sel(stage=mu2).values)
-    photons = {m: ds["photons"].sel(stage=m).values for m in (mu1, mu2)}
+    truth = true_hdr_dn(cfg, sim.stage_array("linear_dn", mu2))
+    photons = {m: sim.stage_array("photons", m) for m in (mu1, mu2)}
     ratio = tdi_light_ratio(photons[mu1], photons[mu2], mu1, mu2)
-    regions = illumination_regions(photons[mu2], ds["reflectance"].sel(stage=mu2).values, ratio)
-    clipped = {m: ds["clipped"].sel(stage=m).values for m in (mu1, mu2)}
+    regions = illumination_regions(photons[mu2], sim.stage_array("reflectance", mu2), ratio)
+    clipped = {m: sim.stage_array("clipped", m) for m in (mu1, mu2)}
     at_top = {m: words[m] >= top for m in (mu1, mu2)}
     summary: dict[str, Any] = {
         "light_ratio": _light_summary(ratio, LIGHT_RATIO_TOLERANCE),

@@ -160,7 +160,7 @@ def _truth_ranges(
 ) -> tuple[float, dict[str, float | None], dict[str, float]]:
     """With the pass's truth: the scene range, the range each image captures and its clipped
     fraction (:class:`PassMetrics`); clears the bright patch's SNR where it is over half clipped."""
-    clip1, clip2 = (sim.dataset["clipped"].sel(stage=m).values for m in (mu1, mu2))
+    clip1, clip2 = (sim.stage_array("clipped", m) for m in (mu1, mu2))
     clipped = {"gamma1": clip1, "gamma2": clip2, "gamma_hdr": np.where(fused.source == mu1, clip1, clip2)}
     bsl = wedge[bright["patch"]]
     for name in images:  # a patch more than half clipped has no SNR either
@@ -206,7 +206,7 @@ def pass_metrics(cfg: BenchConfig, sim: PassResult, fused: FusionResult) -> Pass
     # the darkest and brightest patches in the scene as lit: lowest / highest mean photons (the
     # truth) or mean of Gamma_HDR
     truth = sim.truth  # (without building the dataset when there is none)
-    scene = sim.dataset["photons"].sel(stage=mu2).values if truth else fused.hdr
+    scene = sim.stage_array("photons", mu2) if truth else fused.hdr
     level = {k: float(scene[v].mean()) for k, v in wedge.items()}
     darkest = min(wedge, key=level.__getitem__)
     brightest = max(wedge, key=level.__getitem__)
@@ -252,9 +252,9 @@ def temporal_snr(
     sig: dict[int, np.ndarray] = {}
     var: dict[int, np.ndarray] = {}
     for m in (mu1, mu2):
-        photons = sim.dataset["photons"].sel(stage=m).values[sl]
+        photons = sim.stage_array("photons", m)[sl]
         var[m] = stage_temporal_var_dn2(cfg, photons, m, sim.setup.geom.t_int_s)
-        sig[m] = sim.dataset["linear_dn"].sel(stage=m).values[sl] - stage_offset_dn(s, cfg.dtdi, m)
+        sig[m] = sim.stage_array("linear_dn", m)[sl] - stage_offset_dn(s, cfg.dtdi, m)
     low = fused.source[sl] == mu1
     scale = mu2 / mu1
     hdr_sig = np.where(low, sig[mu1] * scale, sig[mu2])

@@ -23,7 +23,7 @@ near-vertical ones. Frequencies are in cycles per pixel of the image: per line a
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -39,7 +39,8 @@ if TYPE_CHECKING:
     import xarray as xr
 
 __all__ = ["SFR_FREQUENCY_CYC_PX", "DIRECTIONS", "DirectionSFR", "StageImage", "direction_sfr",
-           "has_slanted_edges", "image_sharpness", "stage_images", "mean_curve", "add_sharpness",
+           "has_slanted_edges", "image_sharpness", "stage_images", "read_stage_images", "mean_curve",
+           "add_sharpness", "PassSharpness", "pass_sharpness",
            "sharpness_summary", "sharpness_curves"]
 
 #: common frequency grid of the averaged SFRs [cycles/pixel], 0 .. 1 in steps of 1/50
@@ -115,21 +116,29 @@ def image_sharpness(
     return {d: direction_sfr(img, rois, o, clipped) for d, o in DIRECTIONS.items()}
 
 
-def _hdr_clipped(ds: xr.Dataset) -> np.ndarray:
+#: ``read(name, stage)``: a pass's variable ``name`` of stage ``stage`` (``None``: an image variable)
+Read = Callable[[str, "int | None"], np.ndarray]
+
+
+def _dataset_reader(ds: xr.Dataset) -> Read:
+    return lambda name, m: ds[name].values if m is None else ds[name].sel(stage=m).values
+
+
+def _hdr_clipped(read: Read, stages: Sequence[int]) -> np.ndarray:
     """Where ``gamma_hdr`` is clipped: where the stage it came from is."""
-    src = ds["gamma_hdr_source"].values
+    src = read("gamma_hdr_source", None)
     out = np.zeros(src.shape, dtype=bool)
     for m in np.unique(src):
-        if int(m) in ds.stage.values:
+        if int(m) in stages:
             sel = src == m
-            out[sel] = ds["clipped"].sel(stage=int(m)).values[sel]
+            out[sel] = read("clipped", int(m))[sel]
     return out
 
 
-def _light(ds: xr.Dataset, m: int) -> np.ndarray:
+def _light(read: Read, m: int) -> np.ndarray:
     """The light stage ``m``'s pixels received, ``photons / reflectance`` (1 where unknown)."""
-    ph = ds["photons"].sel(stage=m).values
-    refl = ds["reflectance"].sel(stage=m).values.astype(np.float64)
+    ph = read("photons", m)
+    refl = read("reflectance", m).astype(np.float64)
     light = np.divide(ph, refl, out=np.ones(ph.shape), where=refl > 0)
     return np.where(light > 0, light, 1.0)
 
@@ -138,24 +147,57 @@ def stage_images(ds: xr.Dataset, cfg: BenchConfig) -> list[StageImage]:
     """Every stage image of the pass ``ds`` of the bench ``cfg`` flat-fielded (the module
     docstring: offset removed, divided by the light), then ``gamma_hdr`` when fused; without the
     truth (``photons``, ``reflectance``) the light is taken as uniform."""
-    truth = "photons" in ds and "reflectance" in ds
+    has = {str(n) for n in ds.data_vars}
+    return read_stage_images(_dataset_reader(ds), [int(v) for v in ds.stage.values], has, cfg)
+
+
+def read_stage_images(read: Read, stages: Sequence[int], has: set[str], cfg: BenchConfig) -> list[StageImage]:
+    """:func:`stage_images` of a pass's variables ``has`` (names) read by ``read``."""
+    truth = "photons" in has and "reflectance" in has
     out = []
-    for m in (int(v) for v in ds.stage.values):
-        light = _light(ds, m) if truth else 1.0
-        img = (ds["dn"].sel(stage=m).values - stage_offset_dn(cfg.sensor, cfg.dtdi, m)) / light
-        clip = ds["clipped"].sel(stage=m).values if "clipped" in ds else np.zeros(img.shape, dtype=bool)
+    for m in stages:
+        light = _light(read, m) if truth else 1.0
+        img = (read("dn", m) - stage_offset_dn(cfg.sensor, cfg.dtdi, m)) / light
+        clip = read("clipped", m) if "clipped" in has else np.zeros(img.shape, dtype=bool)
         out.append(StageImage(f"stage_{m:03d}", m, img, clip))
-    if "gamma_hdr" in ds:
-        light = _light(ds, cfg.fusion.mu2) if truth else 1.0
-        clip = _hdr_clipped(ds) if "clipped" in ds else np.zeros(ds["gamma_hdr"].shape, dtype=bool)
-        out.append(StageImage("gamma_hdr", None, ds["gamma_hdr"].values / light, clip))
+    if "gamma_hdr" in has:
+        hdr = read("gamma_hdr", None)
+        light = _light(read, cfg.fusion.mu2) if truth else 1.0
+        clip = _hdr_clipped(read, stages) if "clipped" in has else np.zeros(hdr.shape, dtype=bool)
+        out.append(StageImage("gamma_hdr", None, hdr / light, clip))
     return out
+
+
+@dataclass(frozen=True)
+class PassSharpness:
+    """:func:`pass_sharpness`: the stages' mean e-SFRs per direction (``stages`` in order) and,
+    when fused, ``gamma_hdr``'s (``None`` otherwise); ``rois`` the edges found."""
+
+    stages: list[int]
+    per_stage: list[dict[str, DirectionSFR]]
+    hdr: dict[str, DirectionSFR] | None
+    rois: list[EdgeROI]
+
+
+def pass_sharpness(
+    read: Read, stages: Sequence[int], has: set[str], cfg: BenchConfig
+) -> PassSharpness | None:
+    """The e-SFR of every stage and of ``gamma_hdr`` in both directions (module docstring) of a
+    pass's variables ``has`` read by ``read``; ``None`` when its reflectance (of the first stage)
+    holds no whole dark square."""
+    rois = slanted_edge_rois(read("reflectance", stages[0]))
+    if not rois:
+        return None
+    images = read_stage_images(read, stages, has, cfg)
+    per_stage = [image_sharpness(s.image, rois, s.clipped) for s in images if s.stage is not None]
+    hdr = image_sharpness(images[-1].image, rois, images[-1].clipped) if "gamma_hdr" in has else None
+    return PassSharpness(list(stages), per_stage, hdr, list(rois))
 
 
 def add_sharpness(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     """``ds`` (a pass's dataset with its truth, of the bench ``cfg``) with the e-SFR of every stage and of
-    ``gamma_hdr`` in both directions added (module docstring); unchanged when its reflectance
-    holds no whole dark square.
+    ``gamma_hdr`` in both directions added (:func:`pass_sharpness`); unchanged when its
+    reflectance holds no whole dark square.
 
     Added: the coordinate ``sfr_frequency`` [cycles/px] and, for ``D`` in ``along``, ``across``,
     ``sfr_D`` (stage, sfr_frequency) [1], ``mtf50_D`` (stage) [cycles/px] and, when fused,
@@ -164,32 +206,30 @@ def add_sharpness(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     """
     import xarray as xr
 
-    rois = slanted_edge_rois(ds["reflectance"].isel(stage=0).values)
-    if not rois:
+    stages = [int(v) for v in ds.stage.values]
+    got = pass_sharpness(_dataset_reader(ds), stages, {str(n) for n in ds.data_vars}, cfg)
+    if got is None:
         return ds
-    images = stage_images(ds, cfg)
-    per_stage = [image_sharpness(s.image, rois, s.clipped) for s in images if s.stage is not None]
     new: dict[str, xr.DataArray] = {}
     for d in DIRECTIONS:
         side = "lines (along the track)" if d == "along" else "columns (across the track)"
         new[f"sfr_{d}"] = xr.DataArray(
-            np.stack([s[d].sfr for s in per_stage]), dims=("stage", "sfr_frequency"),
+            np.stack([s[d].sfr for s in got.per_stage]), dims=("stage", "sfr_frequency"),
             attrs={"units": "1", "long_name": f"ISO 12233 e-SFR along the {side}, mean over the edges"})
         new[f"mtf50_{d}"] = xr.DataArray(
-            np.array([s[d].mtf50_cyc_px for s in per_stage]), dims=("stage",),
+            np.array([s[d].mtf50_cyc_px for s in got.per_stage]), dims=("stage",),
             attrs={"units": "cycles/px", "long_name": f"MTF50 along the {side}"})
-    if "gamma_hdr" in ds:
-        hdr = image_sharpness(images[-1].image, rois, images[-1].clipped)
+    if got.hdr is not None:
         for d in DIRECTIONS:
             new[f"gamma_hdr_sfr_{d}"] = xr.DataArray(
-                hdr[d].sfr, dims=("sfr_frequency",),
+                got.hdr[d].sfr, dims=("sfr_frequency",),
                 attrs={"units": "1", "long_name": f"e-SFR {d} the track of gamma_hdr, mean over the edges"})
             new[f"gamma_hdr_mtf50_{d}"] = xr.DataArray(
-                hdr[d].mtf50_cyc_px,
+                got.hdr[d].mtf50_cyc_px,
                 attrs={"units": "cycles/px", "long_name": f"MTF50 {d} the track of gamma_hdr"})
     out = ds.assign_coords(sfr_frequency=("sfr_frequency", SFR_FREQUENCY_CYC_PX, {"units": "cycles/px"}))
     out = out.assign(new)
-    out.attrs["sfr_edges"] = json.dumps([[*e.roi, e.orientation] for e in rois])
+    out.attrs["sfr_edges"] = json.dumps([[*e.roi, e.orientation] for e in got.rois])
     return out
 
 

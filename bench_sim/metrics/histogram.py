@@ -54,6 +54,7 @@ __all__ = [
     "omega_eq17",
     "evaluate_eq18",
     "MAX_DENSE_BINS",
+    "BINCOUNT_MAX_BINS",
 ]
 
 
@@ -114,6 +115,9 @@ def _bin_indices(image: ArrayLike, binning: Binning) -> NDArray[np.int64]:
 
 #: Largest number of bins :func:`dn_histogram` materialises (``omega_eq17`` has no limit).
 MAX_DENSE_BINS = 1 << 26
+#: Most bins :func:`omega_eq17` counts with :func:`numpy.bincount` (a pass over the pixels, 8 bytes
+#: a bin); more (a 32-bit word) are counted by sorting the pixels' bins (:func:`numpy.unique`)
+BINCOUNT_MAX_BINS = 1 << 24
 
 
 def dn_histogram(image: ArrayLike, binning: Binning) -> NDArray[np.int64]:
@@ -162,7 +166,9 @@ def omega_eq17(image: ArrayLike, binning: Binning, ddof: int = 0) -> float:
     n_bins = binning.n_bins
     if not 0 <= ddof < n_bins:
         raise BenchSimError(f"ddof = {ddof}: must lie in 0..{n_bins - 1}")
-    _, counts = np.unique(k, return_counts=True)
+    # the occupied bins' counts (empty bins add 0 to the sum of squares): counted in place up to
+    # BINCOUNT_MAX_BINS bins, sorted beyond (a 32-bit word's 2**32 bins)
+    counts = np.bincount(k) if n_bins <= BINCOUNT_MAX_BINS else np.unique(k, return_counts=True)[1]
     sum_sq = int(np.sum(counts.astype(np.int64) ** 2))
     # L * sum((e_k - P/L)^2) = L * sum(e_k^2) - P^2, exact in Python integers
     scaled_ss = n_bins * sum_sq - n_pixels * n_pixels

@@ -16,7 +16,7 @@ from bench_sim.errors import BenchSimError
 from bench_sim.pipeline.fused_images import fused_images
 from bench_sim.pipeline.store_schema import COORD_ATTRS, pass_attrs, pass_coords
 from bench_sim.pipeline.variables import PASS_VARIABLES, pass_dtypes, pedestal_dn, variable_attrs
-from bench_sim.render.exposures import RenderSetup, iter_photon_frames, prepare
+from bench_sim.render.exposures import RenderSetup, iter_radiance_frames, photons_of, prepare
 from bench_sim.render.frame_kernel import TAP_LOOP
 from bench_sim.runtime.jit import Loop, warm_up
 from bench_sim.runtime.parallel import prefetch, seed_sequence
@@ -75,6 +75,15 @@ class PassResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     make_dataset: Callable[[], xr.Dataset] | None = field(default=None, repr=False)
     truth: bool = False
+    #: the arrays behind ``dataset`` (:class:`~bench_sim.sensor.pass_lines.ArraySink`), ``None`` with a sink
+    arrays: ArraySink | None = field(default=None, repr=False)
+
+    def stage_array(self, name: str, stage: int) -> np.ndarray:
+        """Stage variable ``name`` of stage ``stage``: the array behind
+        ``dataset[name].sel(stage=stage)``, read without building the dataset (xarray)."""
+        if self.arrays is None or name not in self.arrays.index or stage not in self.arrays.index[name]:
+            raise BenchSimError(f"PassResult: no {name} of stage {stage}")
+        return self.arrays.arrays[name][self.arrays.index[name][stage]]
 
     @functools.cached_property
     def dataset(self) -> xr.Dataset:
@@ -87,11 +96,13 @@ class PassResult:
 
 
 def _rendered(setup: RenderSetup, n_rows: int, timings: dict[str, float]) -> Iterator[np.ndarray]:
-    """The pass's chunks of photon frames (rows ``0 .. n_rows - 1``), rendered a chunk ahead in
-    their own thread (:func:`bench_sim.runtime.parallel.prefetch`)."""
+    """The pass's photon frames (rows ``0 .. n_rows - 1``) in pieces of :data:`SENSOR_CHUNK_FRAMES`:
+    chunks of :data:`RENDER_CHUNK_FRAMES` frames rendered a chunk ahead in their own thread
+    (:func:`bench_sim.runtime.parallel.prefetch`), handed over as their float32 radiance (half the
+    bytes of their photons in flight) and turned into photons a piece at a time (the same values)."""
 
     def rendered() -> Iterator[np.ndarray]:
-        frames_iter = iter_photon_frames(setup, chunk=RENDER_CHUNK_FRAMES)
+        frames_iter = iter_radiance_frames(setup, chunk=RENDER_CHUNK_FRAMES)
         while True:
             t0 = time.perf_counter()
             chunk = next(frames_iter, None)
@@ -101,7 +112,12 @@ def _rendered(setup: RenderSetup, n_rows: int, timings: dict[str, float]) -> Ite
             yield chunk
 
     for chunk in prefetch(rendered()):
-        yield chunk[:, :n_rows]
+        for k in range(0, chunk.shape[0], SENSOR_CHUNK_FRAMES):
+            t0 = time.perf_counter()
+            piece = photons_of(setup, chunk[k : k + SENSOR_CHUNK_FRAMES, :n_rows])
+            timings["render_frames"] += time.perf_counter() - t0
+            yield piece
+        del chunk  # not held while the next is awaited
 
 
 def _stream(
@@ -242,7 +258,7 @@ def run_pass(
         return PassResult({}, setup, timings, None, truth=truth)
     dn = {m: array_sink.arrays["dn"][s] for s, m in enumerate(st)}
     make = functools.partial(_make_dataset, cfg, seed, setup, st, array_sink.arrays, tst)
-    return PassResult(dn, setup, timings, make, truth=truth)
+    return PassResult(dn, setup, timings, make, truth=truth, arrays=array_sink)
 
 
 def _pass_truth(

@@ -36,7 +36,10 @@ from bench_sim.rig.geometry import RigGeometry, rig_geometry
 from bench_sim.rig.spectra import check_spectra
 from bench_sim.runtime.backend import BackendChoice, init_mitsuba, select_backend
 
-__all__ = ["RenderSetup", "prepare", "iter_photon_frames", "render_photons", "fast_records", "records_group"]
+__all__ = [
+    "RenderSetup", "prepare", "iter_photon_frames", "iter_radiance_frames", "photons_of", "render_photons",
+    "fast_records", "records_group",
+]
 
 
 @dataclass
@@ -175,18 +178,33 @@ def prepare(
     return RenderSetup(cfg, geom, grid, eng, choice, factor, first_frame, frames, seed, info)
 
 
-def iter_photon_frames(setup: RenderSetup, chunk: int = 64) -> Iterator[np.ndarray]:
-    """Yield photons per pixel per frame in chunks of ``chunk`` frames, shape (n, M, N), float32."""
+def iter_radiance_frames(setup: RenderSetup, chunk: int = 64) -> Iterator[np.ndarray]:
+    """Yield radiance [W m^-2 sr^-1] per pixel per frame in chunks of ``chunk`` frames, shape
+    (n, M, N), float32 (:func:`photons_of` makes their photons)."""
     k = setup.first_frame
     end = setup.first_frame + setup.frames
     while k < end:
         k1 = min(k + chunk, end)
-        photons = setup.engine.radiance_frames(k, k1) * setup.photons_per_radiance
-        np.maximum(photons, 0.0, out=photons)
+        radiance = setup.engine.radiance_frames(k, k1)
         setup.info["mitsuba_renders"] = setup.engine.renders
         setup.info["mitsuba_renders_process"] = mitsuba_render_count()
-        yield photons
+        yield radiance
         k = k1
+
+
+def photons_of(setup: RenderSetup, radiance: np.ndarray) -> np.ndarray:
+    """Photons per pixel per frame of ``radiance`` (n, m, N) of the sensor's first ``m`` rows
+    (:func:`iter_radiance_frames`, all or some of its frames and rows), float64, at least 0.
+    Elementwise: a part of a chunk gets the same values as in the whole chunk's photons."""
+    photons = radiance * setup.photons_per_radiance[: radiance.shape[1]]
+    np.maximum(photons, 0.0, out=photons)
+    return photons
+
+
+def iter_photon_frames(setup: RenderSetup, chunk: int = 64) -> Iterator[np.ndarray]:
+    """Yield photons per pixel per frame in chunks of ``chunk`` frames, shape (n, M, N), float64."""
+    for radiance in iter_radiance_frames(setup, chunk):
+        yield photons_of(setup, radiance)
 
 
 def render_photons(

@@ -18,6 +18,7 @@ edge over a few pixels).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 
@@ -46,13 +47,19 @@ class TextureLens:
         """What makes the blur of a grid, as text (the texture's shared blocks)."""
         return f"{self.otf.key}|{self.h_y_m:.9g}|{self.h_x_m:.9g}|{self.margin_rows}|{self.margin_cols}"
 
-    def _transfer(self, shape: tuple[int, int]) -> np.ndarray:
-        from scipy import fft
+    @property
+    def exact_key(self) -> str:
+        """:attr:`key` and a digest of the OTF on a probe grid of 64 x 64 frequencies: what makes the
+        blur to the bit (the on-disk texture store, :mod:`bench_sim.render.texture_store`; the
+        key's text rounds the lens' numbers and does not name a spectrum's weights)."""
+        probe = self._transfer((64, 64))
+        return f"{self.key}|{hashlib.sha256(np.ascontiguousarray(probe).tobytes()).hexdigest()}"
 
+    def _transfer(self, shape: tuple[int, int]) -> np.ndarray:
         got = self._cache.get(shape)
-        if got is None:
-            fy = fft.fftfreq(shape[0], d=self.h_y_m)
-            fx = fft.rfftfreq(shape[1], d=self.h_x_m)
+        if got is None:  # numpy's frequencies (scipy.fft's are these): no scipy import for the key
+            fy = np.fft.fftfreq(shape[0], d=self.h_y_m)
+            fx = np.fft.rfftfreq(shape[1], d=self.h_x_m)
             got = self.otf.grid(fy, fx)
             self._cache[shape] = got
         return got

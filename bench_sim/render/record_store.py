@@ -52,8 +52,8 @@ from bench_sim.runtime.backend import cache_folder
 from bench_sim.version import __version__
 
 __all__ = [
-    "ENV_SWITCH", "ENV_SIZE", "DEFAULT_MIB", "FORMAT", "ARRAYS", "Stored", "store_dir",
-    "versions", "load", "save", "usage",
+    "ENV_SWITCH", "ENV_SIZE", "DEFAULT_MIB", "FORMAT", "ARRAYS", "Stored", "store_dir", "store_on",
+    "versions", "load", "save", "usage", "limit_bytes", "evict", "source_fingerprint", "package_version",
 ]
 
 #: Environment variable that turns the store off (``off``, ``0``, ``false``, ``no``).
@@ -75,14 +75,18 @@ _FILE = re.compile(r"[0-9a-f]{64}\.npz")
 _SOURCES = ("render/records.py", "rig")
 
 
+def store_on() -> bool:
+    """Whether the on-disk stores are on (:data:`ENV_SWITCH`)."""
+    return os.environ.get(ENV_SWITCH, "").strip().lower() not in _OFF
+
+
 def store_dir() -> Path | None:
     """The store's folder (``<cache folder>/records``), or ``None`` when it is turned off."""
-    if os.environ.get(ENV_SWITCH, "").strip().lower() in _OFF:
-        return None
-    return cache_folder() / "records"
+    return cache_folder() / "records" if store_on() else None
 
 
-def _limit_bytes() -> int:
+def limit_bytes() -> int:
+    """A store folder's size bound [bytes] (:data:`ENV_SIZE`, else :data:`DEFAULT_MIB`)."""
     try:
         mib = float(os.environ.get(ENV_SIZE, DEFAULT_MIB))
     except ValueError:
@@ -92,19 +96,20 @@ def _limit_bytes() -> int:
     return int(mib * 2**20)
 
 
-def _package_version(name: str) -> str:
+def package_version(name: str) -> str:
+    """The installed version of the package ``name`` (``"missing"``)."""
     try:
         return version(name)
     except PackageNotFoundError:
         return "missing"
 
 
-def _source_fingerprint() -> str:
-    """sha256 of the sources that make the records (an editable install keeps its version
-    number while its code changes)."""
+def source_fingerprint(sources: Sequence[str] = _SOURCES) -> str:
+    """sha256 of the ``sources`` (files or folders relative to the package) that make what is
+    stored (an editable install keeps its version number while its code changes)."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for rel in _SOURCES:
+    for rel in sources:
         p = root / rel
         for f in sorted(p.rglob("*.py")) if p.is_dir() else [p]:
             with contextlib.suppress(OSError):
@@ -118,11 +123,11 @@ def versions() -> dict[str, str]:
     versions (package metadata: Mitsuba is not imported), :data:`FORMAT` and the sources'
     fingerprint. Computed once per process."""
     return {
-        "mitsuba": _package_version("mitsuba"),
-        "drjit": _package_version("drjit"),
+        "mitsuba": package_version("mitsuba"),
+        "drjit": package_version("drjit"),
         "bench_sim": __version__,
         "format": str(FORMAT),
-        "source": _source_fingerprint(),
+        "source": source_fingerprint(),
     }
 
 
@@ -195,7 +200,7 @@ def save(key: str, lights: Sequence[str], arrays: Mapping[str, np.ndarray]) -> N
             np.savez(f, meta=np.array(meta), **named)
     except Exception:  # read-only or full disk: the records are only not kept
         return
-    _evict(folder, _limit_bytes())
+    evict(folder, limit_bytes())
 
 
 def _stored(folder: Path) -> list[tuple[int, int, Path]]:
@@ -217,9 +222,9 @@ def usage() -> tuple[int, int]:
     return sum(size for _, size, _ in files), len(files)
 
 
-def _evict(folder: Path, limit: int) -> None:
-    """Delete the least recently used record files of ``folder`` until the rest take at most
-    ``limit`` bytes."""
+def evict(folder: Path, limit: int) -> None:
+    """Delete the least recently used files (``<sha256>.npz``) of ``folder`` until the rest take
+    at most ``limit`` bytes."""
     files = _stored(folder)
     total = sum(size for _, size, _ in files)
     for _, size, path in files:

@@ -41,10 +41,11 @@ from typing import Any
 import numpy as np
 
 from bench_sim.config import BenchConfig
+from bench_sim.render import texture_store
 from bench_sim.render.lens_blur import TextureLens, texture_lens
 from bench_sim.rig.geometry import RigGeometry
 from bench_sim.rig.target import TargetPanel, make_panel, rasterize_at
-from bench_sim.rig.target_sources import MAP_LAYOUTS
+from bench_sim.rig.target_sources import MAP_LAYOUTS, SlantedEdgeMap
 from bench_sim.runtime.parallel import parallel_map, thread_count
 
 __all__ = ["RunTexture", "run_texture", "drum_texture", "smear_filter", "ground_truth_reflectance"]
@@ -91,6 +92,9 @@ class RunTexture:
     #: the lens' blur of the texture (:mod:`bench_sim.render.lens_blur`), ``None``: a perfect lens
     lens: TextureLens | None = None
     _blocks: _Blocks = field(default_factory=_Blocks, repr=False)
+    #: what makes the grid's blocks, as text (:mod:`bench_sim.render.texture_store`); ``None``: not
+    #: stored (a target read from a file or drawn as a whole map)
+    store_key: str | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -121,11 +125,24 @@ class RunTexture:
         lo, hi = max(r0 - m, 0), min(r1 + m, self.n_rows)
         return self.lens.apply(self._rasterize(lo, hi), m - (r0 - lo), m - (hi - r1))
 
+    def _stored_block(self, b: int) -> np.ndarray:
+        """Block ``b`` from the texture store (:mod:`bench_sim.render.texture_store`: the same
+        bytes), else made and stored."""
+        if self.store_key is None:
+            return self._made_block(b)
+        key = f"{self.store_key}|{b}"
+        shape = (min((b + 1) * BLOCK_ROWS, self.n_rows) - b * BLOCK_ROWS, self.n_cols)
+        got = texture_store.load(key, shape)
+        if got is None:
+            got = self._made_block(b)
+            texture_store.save(key, got)
+        return got
+
     def _block(self, b: int) -> np.ndarray:
         blocks = self._blocks.blocks
         got = blocks.get(b)
         if got is None:
-            got = self._made_block(b)
+            got = self._stored_block(b)
             blocks[b] = got
             while len(blocks) > CACHE_BLOCKS:
                 blocks.popitem(last=False)
@@ -209,11 +226,24 @@ def run_texture(
     # panel coordinates: u = y / p (lines), v = x / p + columns / 2
     v0_px, hu_px, hv_px = x_start / p + cfg.target.panel_columns / 2.0, h_y / p, h_x / p
     grid_key: tuple[float | int | str, ...] = (a0, ny, nx, v0_px, hu_px, hv_px)
-    blocks = _blocks_for(cfg, float(circumference_px), grid_key + (() if lens is None else (lens.key,)))
+    grid_key += () if lens is None else (lens.key,)
+    blocks = _blocks_for(cfg, float(circumference_px), grid_key)
     return RunTexture(
         a0 * h_y, h_y, x_start, h_x, q, panel, ny, nx, v0_px=v0_px, hu_px=hu_px, hv_px=hv_px, lens=lens,
-        _blocks=blocks,
+        _blocks=blocks, store_key=_store_key(cfg, panel, float(circumference_px), grid_key, lens),
     )
+
+
+def _store_key(cfg: BenchConfig, panel: TargetPanel, circumference_px: float,
+               grid: tuple[float | int | str, ...], lens_blur: TextureLens | None) -> str | None:
+    """What makes a grid's blocks (:attr:`RunTexture.store_key`): the target, the drum, the grid,
+    the lens and, for a drawn target evaluated where it is read, its map's own key."""
+    tm = panel.texture_map
+    if tm is not None and not isinstance(tm, SlantedEdgeMap):
+        return None
+    drawn = None if tm is None else tm.key
+    lens = None if lens_blur is None else lens_blur.exact_key
+    return json.dumps([cfg.target.model_dump(mode="json"), circumference_px, grid, BLOCK_ROWS, drawn, lens])
 
 
 def smear_filter(values: np.ndarray, h_y_m: float, smear_m: float) -> np.ndarray:

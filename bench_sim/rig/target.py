@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bench_sim.config import TargetConfig
-from bench_sim.rig.target_sources import MAP_LAYOUTS, panel_map
+from bench_sim.rig.target_sources import MAP_LAYOUTS, SlantedEdgeMap, panel_source
 
 __all__ = ["Patch", "TargetPanel", "make_panel", "rasterize", "rasterize_at", "BAR_PERIODS_PX"]
 
@@ -60,7 +60,7 @@ class TargetPanel:
     text_bitmap: np.ndarray | None = None  # (rows, cols) coverage 0..1, 8 samples per pixel
     text_box: tuple[float, float, float, float] | None = None  # u0, u1, v0, v1
     #: map layouts (:mod:`bench_sim.rig.target_sources`): (panel_lines q, panel_columns q) texels
-    texture_map: np.ndarray | None = None
+    texture_map: np.ndarray | SlantedEdgeMap | None = None
 
     @property
     def width_px(self) -> int:
@@ -95,8 +95,7 @@ class TargetPanel:
             iu = np.nonzero(u < self.cfg.panel_lines)[0]
             iv = np.nonzero((v >= 0) & (v < self.cfg.panel_columns))[0]
             if iu.size and iv.size:
-                uu, vv = np.meshgrid(u[iu], v[iv], indexing="ij")
-                out[np.ix_(iu, iv)] = self._map_at(uu, vv)
+                out[np.ix_(iu, iv)] = self._map_grid(u[iu], v[iv])
             return out
         if self.cfg.layout != "paper":
             return out
@@ -123,13 +122,25 @@ class TargetPanel:
         off = 0.0 if half == "left" else self.cfg.panel_columns / 2.0
         return u0, u1, v0 + off, v1 + off
 
-    def _map_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """The texture map's texel containing each panel point (piecewise constant)."""
+    def _map_index(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The texture map's texel rows of ``u`` and columns of ``v`` [panel pixels]."""
         tm = self.texture_map
         assert tm is not None
         iu = np.clip((u * (tm.shape[0] / self.cfg.panel_lines)).astype(np.int64), 0, tm.shape[0] - 1)
         iv = np.clip((v * (tm.shape[1] / self.cfg.panel_columns)).astype(np.int64), 0, tm.shape[1] - 1)
-        return tm[iu, iv]
+        return iu, iv
+
+    def _map_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The texture map's texel containing each panel point (piecewise constant)."""
+        assert self.texture_map is not None
+        return self.texture_map[self._map_index(u, v)]
+
+    def _map_grid(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """:meth:`_map_at` on the grid ``u[:, None] x v[None, :]`` (1-D arrays)."""
+        tm = self.texture_map
+        assert tm is not None
+        iu, iv = self._map_index(u, v)
+        return tm.grid(iu, iv) if isinstance(tm, SlantedEdgeMap) else tm[np.ix_(iu, iv)]
 
     def _base(self) -> float:
         return self.cfg.uniform_reflectance if self.cfg.layout == "uniform" else self.cfg.background
@@ -253,7 +264,7 @@ def make_panel(
     period = circumference_px / n_rep
     if cfg.layout in MAP_LAYOUTS:
         child = rng.spawn(1)[0] if rng is not None else None
-        return TargetPanel(cfg, period, (), texture_map=panel_map(cfg, child))
+        return TargetPanel(cfg, period, (), texture_map=panel_source(cfg, child))
     patches: list[Patch] = []
     if cfg.layout == "paper":
         lay = _layout(cfg)

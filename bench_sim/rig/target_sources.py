@@ -51,6 +51,7 @@ References
 from __future__ import annotations
 
 import functools
+import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -69,8 +70,10 @@ __all__ = [
     "image_map",
     "dead_leaves",
     "slanted_edges",
+    "SlantedEdgeMap",
     "random_bars",
     "panel_map",
+    "panel_source",
     "area_resize",
 ]
 
@@ -266,27 +269,83 @@ def dead_leaves(cfg: TargetConfig, rng: np.random.Generator) -> np.ndarray:
     return out
 
 
+class SlantedEdgeMap:
+    """The panel map of ``layout = "slanted_edges"`` evaluated where it is read: each cell's angle
+    is drawn up front (in the order of the whole map), a texel's value is computed from its cell's
+    angle when it is indexed (``map[iu, iv]``), with the same operations as :meth:`full`, so the
+    values are the same bits; a pass reads the few cells it shows instead of holding the panel's
+    ``(panel_lines q, panel_columns q)`` float32 texels (256 MiB at 1024 x 1024 pixels and 8
+    texels per pixel)."""
+
+    def __init__(self, cfg: TargetConfig, rng: np.random.Generator) -> None:
+        q = cfg.texels_per_pixel
+        self.shape = (cfg.panel_lines * q, cfg.panel_columns * q)
+        self.cell = cfg.edge_cell_px * q
+        self.bright = np.float32(cfg.reflectance_max)
+        self.dark = np.float32(max(cfg.reflectance_max / 4.0, cfg.reflectance_min))
+        n_r, n_c = -(-self.shape[0] // self.cell), -(-self.shape[1] // self.cell)
+        self.cos = np.empty((n_r, n_c))
+        self.sin = np.empty((n_r, n_c))
+        for i in range(n_r):
+            for j in range(n_c):  # one draw per cell, row by row (the map's order)
+                ang = np.deg2rad(cfg.edge_angle_deg + cfg.edge_angle_jitter_deg * rng.uniform(-1.0, 1.0))
+                self.cos[i, j], self.sin[i, j] = np.cos(ang), np.sin(ang)
+
+    @property
+    def key(self) -> str:
+        """What makes the map, as text (its size, cells, values and angles)."""
+        h = hashlib.sha256(self.cos.tobytes() + self.sin.tobytes()).hexdigest()
+        return f"slanted|{self.shape}|{self.cell}|{float(self.bright)!r}|{float(self.dark)!r}|{h}"
+
+    def __getitem__(self, index: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """The texels ``(iu, iv)`` (integer arrays of one shape, inside :attr:`shape`)."""
+        iu, iv = (np.asarray(i, dtype=np.int64) for i in index)
+        ci, cj = iu // self.cell, iv // self.cell
+        cos, sin = self.cos[ci, cj], self.sin[ci, cj]
+        y = iu + 0.5 - (ci * self.cell + self.cell / 2.0)
+        x = iv + 0.5 - (cj * self.cell + self.cell / 2.0)
+        half = self.cell / 4.0
+        inside = (np.abs(x * cos + y * sin) <= half) & (np.abs(-x * sin + y * cos) <= half)
+        return np.where(inside, self.dark, self.bright)
+
+    def grid(self, iu: np.ndarray, iv: np.ndarray) -> np.ndarray:
+        """The texels ``iu[:, None] x iv[None, :]`` (1-D integer arrays inside :attr:`shape`), cell by
+        cell: the same values as ``self[np.ix_(iu, iv)]`` at a fraction of the cost."""
+        iu, iv = np.asarray(iu, dtype=np.int64), np.asarray(iv, dtype=np.int64)
+        out = np.empty((iu.size, iv.size), dtype=np.float32)
+        ci, cj = iu // self.cell, iv // self.cell
+        half = self.cell / 4.0
+        for i in np.unique(ci):
+            rows = np.nonzero(ci == i)[0]
+            y = (iu[rows] + 0.5 - (i * self.cell + self.cell / 2.0))[:, None]
+            for j in np.unique(cj):
+                cols = np.nonzero(cj == j)[0]
+                x = (iv[cols] + 0.5 - (j * self.cell + self.cell / 2.0))[None, :]
+                cos, sin = self.cos[i, j], self.sin[i, j]
+                inside = (np.abs(x * cos + y * sin) <= half) & (np.abs(-x * sin + y * cos) <= half)
+                out[np.ix_(rows, cols)] = np.where(inside, self.dark, self.bright)
+        return out
+
+    def full(self) -> np.ndarray:
+        """The whole map, ``shape`` float32, painted cell by cell."""
+        rows, cols = self.shape
+        cell, half = self.cell, self.cell / 4.0  # the square's half side: half the cell
+        out = np.full(self.shape, self.bright, dtype=np.float32)
+        for i, r0 in enumerate(range(0, rows, cell)):
+            for j, c0 in enumerate(range(0, cols, cell)):
+                cos, sin = self.cos[i, j], self.sin[i, j]
+                cy, cx = r0 + cell / 2.0, c0 + cell / 2.0
+                y = (np.arange(r0, min(r0 + cell, rows)) + 0.5 - cy)[:, None]
+                x = (np.arange(c0, min(c0 + cell, cols)) + 0.5 - cx)[None, :]
+                # coordinates in the square's own (rotated) frame
+                inside = (np.abs(x * cos + y * sin) <= half) & (np.abs(-x * sin + y * cos) <= half)
+                out[r0 : r0 + y.shape[0], c0 : c0 + x.shape[1]][inside] = self.dark
+        return out
+
+
 def slanted_edges(cfg: TargetConfig, rng: np.random.Generator) -> np.ndarray:
     """Panel map of ``layout = "slanted_edges"`` (see the module docstring; [ISO])."""
-    q = cfg.texels_per_pixel
-    rows, cols = cfg.panel_lines * q, cfg.panel_columns * q
-    cell = cfg.edge_cell_px * q
-    bright = cfg.reflectance_max
-    dark = max(cfg.reflectance_max / 4.0, cfg.reflectance_min)
-    out = np.full((rows, cols), bright, dtype=np.float32)
-    half = cell / 4.0  # the square's half side: half the cell
-    for r0 in range(0, rows, cell):
-        for c0 in range(0, cols, cell):
-            ang = np.deg2rad(cfg.edge_angle_deg + cfg.edge_angle_jitter_deg * rng.uniform(-1.0, 1.0))
-            cy, cx = r0 + cell / 2.0, c0 + cell / 2.0
-            y = (np.arange(r0, min(r0 + cell, rows)) + 0.5 - cy)[:, None]
-            x = (np.arange(c0, min(c0 + cell, cols)) + 0.5 - cx)[None, :]
-            # coordinates in the square's own (rotated) frame
-            a = x * np.cos(ang) + y * np.sin(ang)
-            b = -x * np.sin(ang) + y * np.cos(ang)
-            inside = (np.abs(a) <= half) & (np.abs(b) <= half)
-            out[r0 : r0 + y.shape[0], c0 : c0 + x.shape[1]][inside] = dark
-    return out
+    return SlantedEdgeMap(cfg, rng).full()
 
 
 def random_bars(cfg: TargetConfig, rng: np.random.Generator) -> np.ndarray:
@@ -300,6 +359,14 @@ def random_bars(cfg: TargetConfig, rng: np.random.Generator) -> np.ndarray:
         out[pos : pos + max(width, 1)] = rng.uniform(cfg.reflectance_min, cfg.reflectance_max)
         pos += max(width, 1)
     return out
+
+
+def panel_source(cfg: TargetConfig, rng: np.random.Generator | None) -> np.ndarray | SlantedEdgeMap:
+    """What :class:`bench_sim.rig.target.TargetPanel` reads of a map layout: :func:`panel_map`,
+    or for ``slanted_edges`` the same map evaluated where it is read (:class:`SlantedEdgeMap`)."""
+    if cfg.layout == "slanted_edges" and rng is not None:
+        return SlantedEdgeMap(cfg, rng)
+    return panel_map(cfg, rng)
 
 
 def panel_map(cfg: TargetConfig, rng: np.random.Generator | None) -> np.ndarray:

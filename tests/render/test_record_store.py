@@ -183,7 +183,7 @@ def test_size_bound_evicts_the_least_recently_used(store, monkeypatch):
 @pytest.mark.parametrize("value", ["lots", "-1", "nan", ""])
 def test_a_bad_size_bound_means_the_default(monkeypatch, value):
     monkeypatch.setenv(record_store.ENV_SIZE, value)
-    assert record_store._limit_bytes() == int(record_store.DEFAULT_MIB * 2**20)
+    assert record_store.limit_bytes() == int(record_store.DEFAULT_MIB * 2**20)
 
 
 def test_a_folder_that_cannot_be_written_raises_nothing(store, monkeypatch):

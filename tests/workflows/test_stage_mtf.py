@@ -11,6 +11,8 @@ import pytest
 
 from bench_sim.config import with_overrides
 from bench_sim.io import read_png_text
+from bench_sim.measure.sharpness import add_sharpness
+from bench_sim.pipeline import run_pass
 from bench_sim.workflows.reproduce.result import SharpnessResult
 from bench_sim.workflows.reproduce.sharpness_report import sharpness_section
 from bench_sim.workflows.reproduce.stage_mtf import (
@@ -18,6 +20,7 @@ from bench_sim.workflows.reproduce.stage_mtf import (
     COMPANION_TEXELS_PER_PIXEL,
     companion_config,
     measure_stage_mtf,
+    noise_free,
     write_stage_mtf,
 )
 from tests.conftest import make_cfg
@@ -44,9 +47,9 @@ def test_companion_pass_keeps_the_bench_and_swaps_the_target() -> None:
 @pytest.mark.physics
 def test_mtf50_vs_stage_files(tmp_path: Path) -> None:
     cfg = _bench()
-    ds = measure_stage_mtf(cfg, seed=3)
-    assert [int(m) for m in ds.stage.values] == [1, 4, 10, 16, 20]
-    names = write_stage_mtf(ds, cfg, tmp_path, {"seed": 3, "version": "x"})
+    res = measure_stage_mtf(cfg, seed=3)
+    assert res.stages == [1, 4, 10, 16, 20]
+    names = write_stage_mtf(res, cfg, tmp_path, {"seed": 3, "version": "x"})
     assert names == ["mtf50_vs_stage.csv", "mtf50_vs_stage.png"]
     with (tmp_path / "mtf50_vs_stage.csv").open() as fh:
         rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
@@ -67,11 +70,25 @@ def test_mtf50_vs_stage_is_noise_free() -> None:
     and the companion's MTF50s are the same at every stage to 1e-5 (the expected words of a
     sensor without fixed patterns; a noisy pass scatters them by per cents)."""
     cfg = with_overrides(_bench(), {"timing": {"sync_error": 0.0}})
-    ds = measure_stage_mtf(cfg, seed=3)
+    res = measure_stage_mtf(cfg, seed=3)
     for d in ("along", "across"):
-        v = ds[f"mtf50_{d}"].values
+        v = res.mtf50(d)
         np.testing.assert_allclose(v, v[0], rtol=1e-5, err_msg=d)
+
+
+def test_companion_on_arrays_is_the_dataset_path() -> None:
+    """The companion measures on the pass's arrays (no dataset, no xarray on its lane): the same
+    SFRs to the bit as the noise-free dataset through add_sharpness (simulate's and the sweeps' path)."""
+    cfg = _bench()
+    res = measure_stage_mtf(cfg, seed=3)
+    comp = companion_config(cfg)
+    rng = np.random.default_rng(np.random.SeedSequence(3).spawn(2)[1])
+    ds = add_sharpness(noise_free(run_pass(comp, res.stages, rng, truth=True).dataset, comp), comp)
     assert np.array_equal(ds["dn"].values, ds["mean_dn"].values)
+    for d in ("along", "across"):
+        assert np.array_equal(res.sfr(d), ds[f"sfr_{d}"].values, equal_nan=True), d
+        assert np.array_equal(res.mtf50(d), ds[f"mtf50_{d}"].values, equal_nan=True), d
+        assert res.hdr_mtf50(d) == float(ds[f"gamma_hdr_mtf50_{d}"]), d
 
 
 def test_companion_draws_finer_edges_through_a_lens() -> None:

@@ -124,12 +124,10 @@ def point_inputs(tasks: list[PointTask]) -> tuple[list[tuple[Shared, ...]], set[
 
 def _stage_mtf(cfg: BenchConfig, seed: int, stages: tuple[int, ...]) -> dict[int, float | None]:
     """MTF50 along the track per stage on the noise-free companion pass (``None``: not measured)."""
-    ds = measure_stage_mtf(cfg, seed, stages)
-    if "mtf50_along" not in ds:
+    res = measure_stage_mtf(cfg, seed, stages)
+    if res.sharpness is None:
         return dict.fromkeys(stages)
-    vals = dict(
-        zip((int(m) for m in ds.stage.values), (float(v) for v in ds["mtf50_along"].values), strict=True)
-    )
+    vals = dict(zip(res.stages, (float(v) for v in res.mtf50("along")), strict=True))
     return {m: (None if math.isnan(vals[m]) else vals[m]) for m in stages}
 
 

@@ -15,9 +15,9 @@ companion pass with slanted edges:
 :mod:`bench_sim.workflows.reproduce.stage_mtf`). Every file carries the config, seed and version.
 
 Two threads: while the pass runs, a :class:`~bench_sim.runtime.parallel.Lane` beside it measures
-the whole-chain DR and runs the sharpness's companion pass (both on their own random streams,
-so the numbers are those of the steps in order); after it, the lane draws some figures while
-the pass's metrics are computed (:mod:`bench_sim.workflows.reproduce.writing`). With
+the whole-chain DR (on its own random stream, so the numbers are those of the steps in order);
+after it, the lane runs the sharpness's companion pass and draws some figures while the pass's
+metrics are computed (:mod:`bench_sim.workflows.reproduce.writing`). With
 ``BENCH_SIM_THREADS=1`` every step runs in order, with the same files.
 """
 
@@ -249,16 +249,16 @@ def _pass_and_beside(
     cfg: BenchConfig, stages: list[int], rng: np.random.Generator, seed: int, quick: bool, lane: Lane,
     timer: _Timer,
 ) -> tuple[PassResult, _Beside]:
-    """The pass and, on ``lane`` beside it, the whole-chain DR measurement and the companion pass
-    of the sharpness (:func:`measure_stage_mtf`, its own stream).
+    """The pass and, on ``lane`` beside it, the whole-chain DR measurement; then, queued on the
+    lane, the companion pass of the sharpness (:func:`measure_stage_mtf`, its own stream).
 
     The DR measurement draws from ``rng`` where the pass stopped drawing: the pass draws all it
     draws (render seed, fixed pattern, noise seed) before its first frames, so the measurement
     starts then, from a copy of the generator. Should the generator have moved on after that
     (a pass that draws later), the copy is dropped and the measurement runs after the pass from
-    ``rng`` itself: the numbers never depend on the overlap. The companion pass renders its own
-    records with Mitsuba, so it starts once the pass's renders are done (the fast engine's
-    frames are numpy), or after the pass with the reference engine."""
+    ``rng`` itself: the numbers never depend on the overlap. The companion pass starts after the
+    pass (beside the pass's metrics and figures): run beside it, the two passes' working sets
+    add up in the run's peak memory for no gain in time on two cores."""
     queued: dict[str, Any] = {}
 
     def chain(gen: np.random.Generator) -> ChainDR:
@@ -272,16 +272,12 @@ def _pass_and_beside(
     def on_first() -> None:
         queued["state"] = rng.bit_generator.state
         queued["chain"] = lane.submit(functools.partial(chain, copy.deepcopy(rng)))
-        if cfg.render.engine == "fast":
-            queued["mtf"] = lane.submit(stage_mtf)
         lane.submit(writing.warm_up)
 
     sim = _pass_with_progress(cfg, stages, rng, on_first if lane.parallel else None)
     if queued.get("state") != rng.bit_generator.state:
         queued["chain"] = lane.submit(functools.partial(chain, rng))
-    if "mtf" not in queued:
-        queued["mtf"] = lane.submit(stage_mtf)
-    return sim, _Beside(queued["chain"], queued["mtf"])
+    return sim, _Beside(queued["chain"], lane.submit(stage_mtf))
 
 
 def _fuse(cfg: BenchConfig, sim: PassResult) -> tuple[FusionResult, np.ndarray]:

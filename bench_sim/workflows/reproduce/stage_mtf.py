@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -39,7 +40,7 @@ import numpy as np
 from bench_sim.config import BenchConfig, with_overrides
 from bench_sim.fusion.stage_pair import fuse_stage_words
 from bench_sim.io import write_csv, write_figure_png
-from bench_sim.measure.sharpness import add_sharpness
+from bench_sim.measure.sharpness import SFR_FREQUENCY_CYC_PX, PassSharpness, pass_sharpness
 from bench_sim.metrics.sfr_readings import mtf50
 from bench_sim.pipeline import run_pass
 from bench_sim.rig.lens_psf import lens_mtf_across, lens_otf
@@ -51,7 +52,7 @@ if TYPE_CHECKING:
 
 __all__ = ["MTF_STAGES", "COMPANION_LINES", "COMPANION_COLUMNS", "COMPANION_TEXELS_PER_PIXEL",
            "COMPANION_EDGE_ANGLE_DEG", "companion_config", "measure_stage_mtf", "sharpness_result",
-           "write_stage_mtf", "noise_free", "NOISE_FREE", "mtf50_vs_stage_section"]
+           "write_stage_mtf", "noise_free", "NOISE_FREE", "mtf50_vs_stage_section", "StageMTF"]
 
 #: stages measured (those up to ``sensor.rows``), besides ``mu1`` and ``mu2``
 MTF_STAGES: tuple[int, ...] = (1, 10, 20, 40, 60, 80, 100)
@@ -82,6 +83,13 @@ def companion_config(cfg: BenchConfig) -> BenchConfig:
     })
 
 
+def _fused_expected(cfg: BenchConfig, mean1: np.ndarray, mean2: np.ndarray) -> dict[str, np.ndarray]:
+    """``gamma_hdr`` and ``gamma_hdr_source`` of eq. 11 of the expected words ``mean1``, ``mean2`` of
+    stages ``mu1``, ``mu2`` (their dtypes in a pass)."""
+    fused = fuse_stage_words(cfg, mean1, mean2)
+    return {"gamma_hdr": fused.hdr.astype(np.float32), "gamma_hdr_source": fused.source.astype(np.int16)}
+
+
 def noise_free(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     """A pass's dataset (with its truth) with the words ``dn`` replaced by their expectations
     ``mean_dn`` and ``gamma_hdr`` (and its source) by eq. 11 of them
@@ -90,22 +98,57 @@ def noise_free(ds: xr.Dataset, cfg: BenchConfig) -> xr.Dataset:
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
     if "gamma_hdr" in ds:
         mean = ds["mean_dn"]
-        fused = fuse_stage_words(cfg, mean.sel(stage=mu1).values, mean.sel(stage=mu2).values)
-        out["gamma_hdr"] = (ds["gamma_hdr"].dims, fused.hdr.astype(np.float32), ds["gamma_hdr"].attrs)
-        out["gamma_hdr_source"] = (ds["gamma_hdr_source"].dims, fused.source.astype(np.int16),
-                                   ds["gamma_hdr_source"].attrs)
+        fused = _fused_expected(cfg, mean.sel(stage=mu1).values, mean.sel(stage=mu2).values)
+        for name, values in fused.items():
+            out[name] = (ds[name].dims, values, ds[name].attrs)
     return out
 
 
-def measure_stage_mtf(cfg: BenchConfig, seed: int, stages: Sequence[int] | None = None) -> xr.Dataset:
-    """The companion pass (module docstring), noise-free (:func:`noise_free`), with its e-SFR per
-    stage and of ``Gamma_HDR``; at ``stages`` and ``mu1``, ``mu2`` if given (``bench-sim design``:
-    every candidate stage), else at :data:`MTF_STAGES`."""
+@dataclass(frozen=True)
+class StageMTF:
+    """The companion pass's sharpness (:func:`measure_stage_mtf`): its ``stages`` and the e-SFRs of
+    their noise-free images (``None``: no edge found)."""
+
+    stages: list[int]
+    sharpness: PassSharpness | None
+
+    def mtf50(self, direction: str) -> np.ndarray:
+        """MTF50 per stage [cycles/px] (NaN without edges)."""
+        if self.sharpness is None:
+            return np.full(len(self.stages), np.nan)
+        return np.array([s[direction].mtf50_cyc_px for s in self.sharpness.per_stage])
+
+    def sfr(self, direction: str) -> np.ndarray:
+        """The mean e-SFR per stage on :data:`bench_sim.measure.sharpness.SFR_FREQUENCY_CYC_PX`."""
+        if self.sharpness is None:
+            return np.full((len(self.stages), SFR_FREQUENCY_CYC_PX.size), np.nan)
+        return np.stack([s[direction].sfr for s in self.sharpness.per_stage])
+
+    def hdr_mtf50(self, direction: str) -> float | None:
+        """``Gamma_HDR``'s MTF50 [cycles/px] (``None`` without it or NaN)."""
+        hdr = None if self.sharpness is None else self.sharpness.hdr
+        return None if hdr is None else _num(hdr[direction].mtf50_cyc_px)
+
+
+def measure_stage_mtf(cfg: BenchConfig, seed: int, stages: Sequence[int] | None = None) -> StageMTF:
+    """The companion pass (module docstring), noise-free (:func:`noise_free`, on the pass's arrays:
+    no dataset is built), with its e-SFR per stage and of ``Gamma_HDR``; at ``stages`` and ``mu1``,
+    ``mu2`` if given (``bench-sim design``: every candidate stage), else at :data:`MTF_STAGES`."""
     comp = companion_config(cfg)
     chosen = MTF_STAGES if stages is None else tuple(stages)
     stages = sorted({m for m in chosen if m <= cfg.sensor.rows} | {cfg.fusion.mu1, cfg.fusion.mu2})
     rng = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(2)[1])
-    return add_sharpness(noise_free(run_pass(comp, stages, rng, truth=True).dataset, comp), comp)
+    sim = run_pass(comp, stages, rng, truth=True)
+    assert sim.arrays is not None
+    has = set(sim.arrays.arrays)
+    mu1, mu2 = comp.fusion.mu1, comp.fusion.mu2
+    images = _fused_expected(comp, sim.stage_array("mean_dn", mu1), sim.stage_array("mean_dn", mu2)) \
+        if "gamma_hdr" in has else {}
+
+    def read(name: str, m: int | None) -> np.ndarray:
+        return images[name] if m is None else sim.stage_array("mean_dn" if name == "dn" else name, m)
+
+    return StageMTF(list(stages), pass_sharpness(read, stages, has, comp))
 
 
 def _num(v: Any) -> float | None:
@@ -119,25 +162,25 @@ def _median(values: Any) -> float | None:
     return float(np.median(v)) if v.size else None
 
 
-def sharpness_result(ds: xr.Dataset, cfg: BenchConfig) -> SharpnessResult:
+def sharpness_result(res: StageMTF, cfg: BenchConfig) -> SharpnessResult:
     """The bench's sharpness for the report (:class:`SharpnessResult`) from the companion pass
-    ``ds``: medians over its stages, and the closed form across the track at the companion's edge
+    ``res``: medians over its stages, and the closed form across the track at the companion's edge
     angle ``t``: ``lens(f) sinc(f cos t) sinc(f sin t)`` at Nyquist, and that times the e-SFR's
     bins ``sinc(f cos(t) / 4)``."""
     t = math.radians(COMPANION_EDGE_ANGLE_DEG)
     f = np.linspace(0.0, 1.0, 2001)
     closed = lens_mtf_across(cfg, f) * np.abs(np.sinc(f * math.cos(t)) * np.sinc(f * math.sin(t)))
     nyq = float(np.interp(0.5, f, closed))
-    have = "sfr_across" in ds
-    k = int(np.argmin(np.abs(ds["sfr_frequency"].values - 0.5))) if have else 0
+    have = res.sharpness is not None
+    k = int(np.argmin(np.abs(SFR_FREQUENCY_CYC_PX - 0.5)))
     otf = lens_otf(cfg)
     return SharpnessResult(
         lens="a perfect lens (lens.diffraction = false)" if otf is None else otf.source,
-        sharpness_stages=[int(m) for m in ds.stage.values],
-        mtf50_across_cyc_px=_median(ds["mtf50_across"].values) if have else None,
-        mtf50_along_cyc_px=_median(ds["mtf50_along"].values) if have else None,
-        mtf_nyquist_across=_median(ds["sfr_across"].values[:, k]) if have else None,
-        mtf_nyquist_along=_median(ds["sfr_along"].values[:, k]) if have else None,
+        sharpness_stages=list(res.stages),
+        mtf50_across_cyc_px=_median(res.mtf50("across")) if have else None,
+        mtf50_along_cyc_px=_median(res.mtf50("along")) if have else None,
+        mtf_nyquist_across=_median(res.sfr("across")[:, k]) if have else None,
+        mtf_nyquist_along=_median(res.sfr("along")[:, k]) if have else None,
         closed_nyquist_across=nyq,
         closed_nyquist_across_binned=nyq * float(np.sinc(0.5 * math.cos(t) / 4)),
         closed_mtf50_across_cyc_px=_num(mtf50(f, closed)),
@@ -145,8 +188,8 @@ def sharpness_result(ds: xr.Dataset, cfg: BenchConfig) -> SharpnessResult:
     )
 
 
-def write_stage_mtf(ds: xr.Dataset, cfg: BenchConfig, folder: Path, meta: dict[str, Any]) -> list[str]:
-    """``mtf50_vs_stage.csv`` and ``.png`` of the companion pass ``ds`` of the bench ``cfg`` in
+def write_stage_mtf(res: StageMTF, cfg: BenchConfig, folder: Path, meta: dict[str, Any]) -> list[str]:
+    """``mtf50_vs_stage.csv`` and ``.png`` of the companion pass ``res`` of the bench ``cfg`` in
     ``folder`` (module docstring); returns the names."""
     import matplotlib
 
@@ -155,13 +198,10 @@ def write_stage_mtf(ds: xr.Dataset, cfg: BenchConfig, folder: Path, meta: dict[s
 
     meta = dict(meta, figure="MTF50 versus stage (ISO 12233 e-SFR, companion pass with a "
                 f"slanted_edges target on the same bench; {NOISE_FREE})", noise=NOISE_FREE)
-    stages = [int(m) for m in ds.stage.values]
-    have = "mtf50_along" in ds
-    along = ds["mtf50_along"].values if have else np.full(len(stages), np.nan)
-    across = ds["mtf50_across"].values if have else np.full(len(stages), np.nan)
+    stages = list(res.stages)
+    along, across = res.mtf50("along"), res.mtf50("across")
     rows: list[list[Any]] = [[m, _num(a), _num(c)] for m, a, c in zip(stages, along, across, strict=True)]
-    hdr = {d: (_num(ds[f"gamma_hdr_mtf50_{d}"]) if f"gamma_hdr_mtf50_{d}" in ds else None)
-           for d in ("along", "across")}
+    hdr = {d: res.hdr_mtf50(d) for d in ("along", "across")}
     rows.append(["gamma_hdr", hdr["along"], hdr["across"]])
     header = ["stage", "mtf50_along_cyc_px", "mtf50_across_cyc_px"]
     write_csv(folder / "mtf50_vs_stage.csv", header, rows, meta)

@@ -19,6 +19,15 @@ __all__ = [
 
 ERROR_FIGURE = "gamma_hdr_error.png"
 LIGHT_RATIO_FIGURE = "tdi_light_ratio.png"
+#: a map's panel is at most this many times as tall as wide (a longer run is drawn smaller, so the
+#: canvas, and the memory it takes, stops growing with the lines)
+MAX_PANEL_ASPECT = 2.0
+
+
+def _panel_height_in(shape: tuple[int, ...]) -> float:
+    """The figure's height [inches] for a map of ``shape`` (lines, columns) in 5.5-inch panels."""
+    h, w = shape
+    return 1.2 + 5.5 * min(h / max(w, 1), MAX_PANEL_ASPECT)
 
 
 def truth_error_figure(maps: Mapping[str, np.ndarray], path: Path, meta: Mapping[str, Any]) -> Path:
@@ -28,10 +37,8 @@ def truth_error_figure(maps: Mapping[str, np.ndarray], path: Path, meta: Mapping
 
     titles = {"eq11": "eq. 11 (paper)", "clip": "highest unclipped stage", "clip_margin": "clip with margin"}
     panels = [(f"relative_error_{k}", t) for k, t in titles.items() if f"relative_error_{k}" in maps]
-    h, w = maps["relative_error_eq11"].shape
-    fig, axes = plt.subplots(
-        1, len(panels), figsize=(5.5 * len(panels), 1.2 + 5.5 * h / max(w, 1)), dpi=110, squeeze=False
-    )
+    height = _panel_height_in(maps["relative_error_eq11"].shape)
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.5 * len(panels), height), dpi=110, squeeze=False)
     im = None
     for ax, (key, title) in zip(axes[0], panels, strict=True):
         im = ax.imshow(maps[key], cmap="RdBu_r", vmin=-0.5, vmax=0.5, interpolation="nearest")
@@ -50,8 +57,7 @@ def light_ratio_figure(ratio: np.ndarray, tolerance: float, path: Path, meta: Ma
     line and column, with the tolerance band's edge ``|r - 1| = tolerance`` outlined."""
     import matplotlib.pyplot as plt
 
-    h, w = ratio.shape
-    fig, ax = plt.subplots(figsize=(6.5, 1.2 + 5.5 * h / max(w, 1)), dpi=110)
+    fig, ax = plt.subplots(figsize=(6.5, _panel_height_in(ratio.shape)), dpi=110)
     finite = ratio[np.isfinite(ratio)]
     span = float(np.max(np.abs(np.log2(finite)))) if finite.size else 1.0
     span = max(span, 2 * tolerance)
