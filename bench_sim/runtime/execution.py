@@ -40,6 +40,7 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError, ClusterError
 from bench_sim.runtime.cluster import (
+    close_in_background,
     probe_scheduler,
     quiet_dask_logs,
     quiet_local_cluster,
@@ -53,6 +54,7 @@ __all__ = [
     "task_seed_sequence",
     "task_generator",
     "open_client",
+    "release_client",
     "run_tasks",
     "worker_cache",
     "default_workers",
@@ -223,6 +225,14 @@ def open_client(
         return
     with quiet_dask_logs():
         yield from _client(workers, scheduler, connect_timeout_s)
+
+
+def release_client(client: Any) -> None:
+    """Every task of the run is done: a local cluster from :func:`open_client` starts closing on
+    a thread of its own, so the caller writes its outputs while the worker processes stop, off
+    the critical path; the ``with open_client(...)`` block's end waits for the close to finish.
+    Nothing for ``None`` (in-process runs) or a ``--scheduler`` cluster."""
+    close_in_background(client)
 
 
 def _client(workers: int | None, scheduler: str | None, connect_timeout_s: float | None) -> Iterator[Any]:
