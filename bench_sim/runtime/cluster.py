@@ -40,6 +40,7 @@ from typing import Any
 
 from bench_sim.errors import BenchSimError, ClusterError
 from bench_sim.io.interrupts import deferred_interrupts
+from bench_sim.runtime.preload import import_in_background
 
 __all__ = [
     "SCHEMES",
@@ -191,21 +192,24 @@ def _own_process_group() -> None:
         os.setpgid(0, 0)
 
 
-def _prepare_worker() -> None:
+def _prepare_worker(preload: tuple[str, ...] = ()) -> None:
     """Run in each worker process of a local cluster as it starts: its own process group
-    (:func:`_own_process_group`) and a quick exit. At its exit the interpreter's last garbage
+    (:func:`_own_process_group`), the modules its tasks need imported on a thread while the
+    client prepares them (``preload``), and a quick exit. At its exit the interpreter's last garbage
     collection walks every object the run's imports made (Mitsuba, xarray, numba: ~1 s per
     worker, which the cluster's close waits for); ``gc.freeze`` at exit leaves those out. The
     worker's tasks and their files are closed by then, and its memory goes back with the process."""
     _own_process_group()
+    if preload:
+        import_in_background(preload, nice=0)
     atexit.register(gc.freeze)
 
 
 @contextlib.contextmanager
-def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
+def quiet_local_cluster(n_workers: int, preload: tuple[str, ...] = ()) -> Iterator[Any]:
     """A ``LocalCluster`` of ``n_workers`` one-thread processes and its client, closed in order
     (client, then cluster: no unclosed socket); its workers ignore Ctrl-C (see the module
-    docstring) and log only errors."""
+    docstring), log only errors and import ``preload`` (module names) as soon as they start."""
     from distributed import Client, LocalCluster
 
     with warnings.catch_warnings():
@@ -231,7 +235,7 @@ def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
                         env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
                     )
                 client = Client(cluster)
-                client.run(_prepare_worker)  # in every worker of the cluster
+                client.run(_prepare_worker, preload)  # in every worker of the cluster
         except BaseException:
             if cluster is not None:
                 _close_quietly(client, cluster)

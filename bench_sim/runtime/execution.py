@@ -197,7 +197,8 @@ def _run_one(func: Callable[..., Any], index: int, arg: Any, *shared: Any) -> Ta
 
 @contextlib.contextmanager
 def open_client(
-    workers: int | None = None, scheduler: str | None = None, *, connect_timeout_s: float | None = None
+    workers: int | None = None, scheduler: str | None = None, *, connect_timeout_s: float | None = None,
+    preload: Sequence[str] = (),
 ) -> Iterator[Any]:
     """A ``dask.distributed.Client`` for a run; ``None`` for in-process execution.
 
@@ -214,6 +215,10 @@ def open_client(
     connect_timeout_s
         How long to wait for the scheduler's handshake [s] before giving up with a one-line
         error (default: ``BENCH_SIM_CONNECT_TIMEOUT_S``, else 10 s).
+    preload
+        Modules the tasks will need (dotted names, e.g. the task function's module): the workers
+        of a new local cluster import them as soon as they start, while this process prepares
+        the tasks (:mod:`bench_sim.runtime.preload`).
 
     Notes
     -----
@@ -224,7 +229,7 @@ def open_client(
         yield None
         return
     with quiet_dask_logs():
-        yield from _client(workers, scheduler, connect_timeout_s)
+        yield from _client(workers, scheduler, connect_timeout_s, tuple(preload))
 
 
 def release_client(client: Any) -> None:
@@ -235,7 +240,9 @@ def release_client(client: Any) -> None:
     close_in_background(client)
 
 
-def _client(workers: int | None, scheduler: str | None, connect_timeout_s: float | None) -> Iterator[Any]:
+def _client(
+    workers: int | None, scheduler: str | None, connect_timeout_s: float | None, preload: tuple[str, ...]
+) -> Iterator[Any]:
     """:func:`open_client`'s body for a cluster (a generator for ``yield from``)."""
     if scheduler is not None:
         timeout = connect_timeout_s if connect_timeout_s is not None else _env_seconds(
@@ -260,7 +267,7 @@ def _client(workers: int | None, scheduler: str | None, connect_timeout_s: float
     n = default_workers() if workers is None else int(workers)
     if n < 0:
         raise BenchSimError(f"--workers = {n}: must be >= 0 (0 runs in this process)")
-    with quiet_local_cluster(n) as client:
+    with quiet_local_cluster(n, preload) as client:
         yield client
 
 

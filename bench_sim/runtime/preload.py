@@ -26,15 +26,18 @@ FIGURES = ("matplotlib.figure", "matplotlib.backends.backend_agg")
 NICE = 19
 
 
-def import_in_background(modules: Iterable[str]) -> threading.Thread:
-    """Import ``modules`` (dotted names), in order, on a daemon thread of the lowest CPU
-    priority; returns the thread (started). Nothing is required of the caller: the command's
-    own imports of the same modules find them done or wait for them."""
+def import_in_background(modules: Iterable[str], nice: int = NICE) -> threading.Thread:
+    """Import ``modules`` (dotted names), in order, on a daemon thread of CPU priority ``nice``
+    (default the lowest; ``0``: the process's own, for a process that has nothing else to do
+    meanwhile, such as a cluster's worker before its first task); returns the thread (started).
+    Nothing is required of the caller: its own imports of the same modules find them done or
+    wait for them."""
     names = list(modules)
 
     def run() -> None:
         with contextlib.suppress(AttributeError, OSError):  # only this thread (Linux: per-thread nice)
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
+            if nice:
+                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
         for name in names:
             with contextlib.suppress(Exception):  # the command's own import says what is wrong
                 importlib.import_module(name)

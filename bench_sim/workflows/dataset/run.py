@@ -407,9 +407,9 @@ def _plan_and_run(
     plan = _plan(spec_path, out, workers, scheduler, resume, only)
     spec, out = plan.spec, plan.out
     run = DatasetRun(out=out, samples=spec.samples)
-    # the execution layer first: a scheduler that cannot be reached (or a cluster that cannot
-    # start) is refused before anything is laid out at --out
-    cluster = open_client(workers=workers, scheduler=scheduler) if plan.todo else contextlib.nullcontext()
+    # the execution layer first (refused before anything is laid out at --out if it cannot start)
+    cluster = contextlib.nullcontext() if not plan.todo else open_client(  # the workers import this
+        workers=workers, scheduler=scheduler, preload=(__name__, "dask.array"))  # module at once
     laid_out = False
     try:
         with cluster as client:

@@ -255,7 +255,8 @@ def _run_and_write(
     opened = False
     # the cluster is reached (or started) before anything is written: an unreachable scheduler
     # leaves no output behind
-    cluster = open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext()
+    cluster = contextlib.nullcontext() if not todo else open_client(  # the workers import the point module
+        workers=workers, scheduler=scheduler, preload=(measure_point.__module__, "dask.array"))  # at once
     try:
         with cluster as client:
             sessions, records = _open_folder(plan, workers, scheduler)
