@@ -55,12 +55,20 @@ test-stress: setup
 install-check:
 	bash scripts/check_install.sh
 
+# Every benchmark (long: several check out a baseline revision and pair whole runs with it):
+# run them on an idle machine
 bench: setup
 	$(PY) benchmarks/bench_render.py
 	$(PY) benchmarks/bench_sensor.py
+	$(PY) benchmarks/bench_effects.py
 	$(PY) benchmarks/bench_fusion.py
 	$(PY) benchmarks/bench_reproduce.py
+	$(PY) benchmarks/bench_simulate.py
 	$(PY) benchmarks/bench_sweep.py
+	$(PY) benchmarks/bench_dataset.py
+	$(PY) benchmarks/bench_design.py
+	$(PY) benchmarks/bench_release.py
+	$(PY) benchmarks/bench_startup.py
 	$(PY) benchmarks/bench_resources.py
 
 clean:

@@ -76,6 +76,38 @@ def test_a_signal_during_an_import_is_raised_just_after_it(
     del sys.modules[name]
 
 
+def test_another_thread_holding_the_import_lock_does_not_hold_back_a_signal() -> None:
+    """A thread that holds the global import lock (a low-priority import beside the command,
+    starved on a loaded machine) does not make the main thread count as importing: Ctrl-C is
+    raised at once, not when that thread lets go."""
+    import _imp
+    import threading
+
+    held, release = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        _imp.acquire_lock()
+        try:
+            held.set()
+            release.wait(10.0)
+        finally:
+            _imp.release_lock()
+
+    thread = threading.Thread(target=hold, daemon=True)
+    thread.start()
+    try:
+        assert held.wait(5.0)
+        with pytest.raises(KeyboardInterrupt), command_signals():
+            start = time.monotonic()
+            signal.raise_signal(signal.SIGINT)
+            while time.monotonic() - start < 5.0:
+                pass
+        assert time.monotonic() - start < 1.0
+    finally:
+        release.set()
+        thread.join(10.0)
+
+
 def test_the_import_machinery_counts_as_importing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A frame seen from inside the import system (a finder on ``sys.meta_path``, called with
     the module locks of ``importlib._bootstrap`` around it) is importing; the test's own frame

@@ -27,7 +27,6 @@ ever, and the process hangs instead of stopping.
 
 from __future__ import annotations
 
-import _imp
 import contextlib
 import os
 import signal
@@ -82,10 +81,11 @@ def signal_exception(signum: int) -> BaseException:
 
 def importing(frame: FrameType | None) -> bool:
     """Whether the main thread, stopped at ``frame``, is inside an import: an ``importlib``
-    frame on its stack (the import system or a module being executed by it), or the import
-    lock held."""
-    if _imp.lock_held():
-        return True
+    frame on its stack (the import system, a module being executed by it, a module lock's
+    callback). The global import lock (``_imp.lock_held``) is not asked: it says that *some*
+    thread holds it, and a thread importing beside the command at low priority
+    (:mod:`bench_sim.runtime.preload`) can hold it for seconds on a loaded machine, which held
+    back a Ctrl-C that long; the main thread takes it only inside ``importlib`` frames."""
     f = frame
     while f is not None:
         name = f.f_code.co_filename
