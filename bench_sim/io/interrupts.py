@@ -15,7 +15,7 @@ ever, and the process hangs instead of stopping.
   step. Blocks nest; outside the main thread the block runs as is.
 * :func:`command_signals` is the handling of a command's run: SIGINT raises
   ``KeyboardInterrupt`` and SIGTERM :class:`Terminated`, except while the main thread is inside
-  an import (an ``importlib`` frame on its stack, or the import lock held): then the signal is
+  an import (an ``importlib`` frame on its stack, :func:`importing`): then the signal is
   sent again a moment later (:data:`REDELIVER_S`) by a thread started beforehand, until the
   import has ended. An import that does not end within :data:`IMPORT_PATIENCE_S` is given up:
   one line and the exit status at once (a killed run's temporaries are removed by the next run).
