@@ -76,6 +76,21 @@ def test_a_signal_during_an_import_is_raised_just_after_it(
     del sys.modules[name]
 
 
+def test_a_signal_an_earlier_run_left_pending_does_not_end_the_next(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An earlier command run in this process (a test's) whose deferred signal was then taken by
+    other handlers leaves no pending mark: a signal during the next run's import is raised just
+    after the import, as in a fresh process, not taken for an import that never ended (which
+    ended the process: a crashed test worker)."""
+    from bench_sim.io import interrupts
+
+    interrupts._redelivery().since[signal.SIGINT] = time.monotonic() - 2 * interrupts.IMPORT_PATIENCE_S
+    test_a_signal_during_an_import_is_raised_just_after_it(
+        tmp_path, monkeypatch, signal.SIGINT, KeyboardInterrupt
+    )
+
+
 def test_another_thread_holding_the_import_lock_does_not_hold_back_a_signal() -> None:
     """A thread that holds the global import lock (a low-priority import beside the command,
     starved on a loaded machine) does not make the main thread count as importing: Ctrl-C is

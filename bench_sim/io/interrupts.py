@@ -223,12 +223,17 @@ def command_signals() -> Iterator[None]:
             warnings.simplefilter("ignore")
             sys.unraisablehook = _ignore_unraisable
         return
-    previous = _install(_import_safe(_redelivery()))
+    redelivery = _redelivery()
+    # a signal an earlier run in this process deferred and then left to other handlers is not
+    # pending for this one (its patience, counted from then, would end this process at once)
+    redelivery.since.clear()
+    previous = _install(_import_safe(redelivery))
     try:
         yield
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+        redelivery.since.clear()
 
 
 @contextlib.contextmanager
