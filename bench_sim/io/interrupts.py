@@ -83,9 +83,9 @@ def importing(frame: FrameType | None) -> bool:
     """Whether the main thread, stopped at ``frame``, is inside an import: an ``importlib``
     frame on its stack (the import system, a module being executed by it, a module lock's
     callback). The global import lock (``_imp.lock_held``) is not asked: it says that *some*
-    thread holds it, and a thread importing beside the command at low priority
-    (:mod:`bench_sim.runtime.preload`) can hold it for seconds on a loaded machine, which held
-    back a Ctrl-C that long; the main thread takes it only inside ``importlib`` frames."""
+    thread holds it, and another thread importing at a low priority can hold it for seconds on a
+    loaded machine, which held back a Ctrl-C that long; the main thread takes it only inside
+    ``importlib`` frames."""
     f = frame
     while f is not None:
         name = f.f_code.co_filename
