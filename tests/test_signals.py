@@ -28,7 +28,7 @@ from types import FrameType
 
 import pytest
 
-from bench_sim.io.interrupts import REDELIVER_S, Terminated, command_signals, importing
+from bench_sim.io.interrupts import importing
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
@@ -50,13 +50,36 @@ def _lines(text: str) -> list[str]:
 # --- 1. never inside an import ---------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("sig", "exc"), [(signal.SIGINT, KeyboardInterrupt), (signal.SIGTERM, Terminated)])
-def test_a_signal_during_an_import_is_raised_just_after_it(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, sig: int, exc: type[BaseException]
-) -> None:
-    """The module sends the signal to its own process half-way through its body: the body runs
-    to its end (the import completes, the module is in ``sys.modules``) and the exception comes
-    a moment later, in the caller, not inside the import."""
+#: a child process's run of one signal case: the module NAME (in TMP) sends SIG to its own process
+#: half-way through its body, inside ``command_signals``; PRELUDE runs first. It prints what it saw
+#: and, half a second after the block, "clean" (a late second delivery would have killed it).
+_IMPORT_CASE = """
+import importlib, signal, sys, threading, time, _imp
+from bench_sim.io import interrupts
+from bench_sim.io.interrupts import REDELIVER_S, Terminated, command_signals
+sys.path.insert(0, TMP)
+PRELUDE
+exc = KeyboardInterrupt if SIG == signal.SIGINT else Terminated
+imported, start, took = False, 0.0, None
+try:
+    with command_signals():
+        start = time.monotonic()
+        module = importlib.import_module(NAME)
+        imported = module.DONE
+        deadline = time.monotonic() + 50 * REDELIVER_S + 2.0
+        while time.monotonic() < deadline:  # the signal comes again once the import is over
+            pass
+except exc:
+    took = time.monotonic() - start
+print("raised" if took is not None else "not raised", imported, NAME in sys.modules, took)
+time.sleep(0.5)
+print("clean")
+"""
+
+
+def _signal_in_import(tmp_path: Path, sig: int, prelude: str = "") -> list[str]:
+    """Run :data:`_IMPORT_CASE` in a fresh process (a signal test in the test process itself
+    would share its handlers and its pending signals with every other test there)."""
     name = f"bench_sim_test_signal_in_import_{sig}"
     (tmp_path / f"{name}.py").write_text(
         "import signal\n"
@@ -64,63 +87,67 @@ def test_a_signal_during_an_import_is_raised_just_after_it(
         "total = sum(range(200000))  # bytecodes after the signal, inside the import\n"
         "DONE = True\n"
     )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    imported = False
-    with pytest.raises(exc), command_signals():
-        module = importlib.import_module(name)
-        imported = module.DONE
-        deadline = time.monotonic() + 50 * REDELIVER_S + 2.0
-        while time.monotonic() < deadline:  # the signal comes again once the import is over
+    code = (_IMPORT_CASE.replace("PRELUDE", prelude)
+            .replace("TMP)", f"{str(tmp_path)!r})").replace("NAME)", f"{name!r})")
+            .replace("NAME in", f"{name!r} in").replace("SIG ==", f"{int(sig)} =="))
+    res = subprocess.run([sys.executable, "-c", code], env=_env(), capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, (res.returncode, res.stdout, res.stderr[-2000:])
+    return _lines(res.stdout)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_during_an_import_is_raised_just_after_it(tmp_path: Path, sig: int) -> None:
+    """The module sends the signal to its own process half-way through its body: the body runs
+    to its end (the import completes, the module is in ``sys.modules``), the exception comes a
+    moment later, in the caller, not inside the import, and only once."""
+    said = _signal_in_import(tmp_path, sig)
+    assert said[0].startswith("raised True True") and said[-1] == "clean", said
+
+
+def test_a_signal_an_earlier_run_left_pending_does_not_end_the_next(tmp_path: Path) -> None:
+    """An earlier command run in this process whose deferred signal was then taken by other
+    handlers leaves no pending mark: a signal during the next run's import is raised just after
+    the import, as in a fresh process, not taken for an import that never ended (which ended the
+    process: a crashed test worker)."""
+    stale = ("interrupts._redelivery().since[signal.SIGINT] = "
+             "time.monotonic() - 2 * interrupts.IMPORT_PATIENCE_S")
+    said = _signal_in_import(tmp_path, signal.SIGINT, stale)
+    assert said[0].startswith("raised True True") and said[-1] == "clean", said
+
+
+_LOCK_HELD_CASE = """
+import signal, threading, time, _imp
+from bench_sim.io.interrupts import command_signals
+held = threading.Event()
+def hold():
+    _imp.acquire_lock()
+    held.set()
+    time.sleep(5.0)
+    _imp.release_lock()
+threading.Thread(target=hold, daemon=True).start()
+held.wait(5.0)
+took = None
+try:
+    with command_signals():
+        start = time.monotonic()
+        signal.raise_signal(signal.SIGINT)
+        while time.monotonic() - start < 8.0:
             pass
-    assert imported and name in sys.modules
-    del sys.modules[name]
-
-
-def test_a_signal_an_earlier_run_left_pending_does_not_end_the_next(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """An earlier command run in this process (a test's) whose deferred signal was then taken by
-    other handlers leaves no pending mark: a signal during the next run's import is raised just
-    after the import, as in a fresh process, not taken for an import that never ended (which
-    ended the process: a crashed test worker)."""
-    from bench_sim.io import interrupts
-
-    interrupts._redelivery().since[signal.SIGINT] = time.monotonic() - 2 * interrupts.IMPORT_PATIENCE_S
-    test_a_signal_during_an_import_is_raised_just_after_it(
-        tmp_path, monkeypatch, signal.SIGINT, KeyboardInterrupt
-    )
+except KeyboardInterrupt:
+    took = time.monotonic() - start
+print(took)
+"""
 
 
 def test_another_thread_holding_the_import_lock_does_not_hold_back_a_signal() -> None:
-    """A thread that holds the global import lock (a low-priority import beside the command,
-    starved on a loaded machine) does not make the main thread count as importing: Ctrl-C is
-    raised at once, not when that thread lets go."""
-    import _imp
-    import threading
-
-    held, release = threading.Event(), threading.Event()
-
-    def hold() -> None:
-        _imp.acquire_lock()
-        try:
-            held.set()
-            release.wait(10.0)
-        finally:
-            _imp.release_lock()
-
-    thread = threading.Thread(target=hold, daemon=True)
-    thread.start()
-    try:
-        assert held.wait(5.0)
-        with pytest.raises(KeyboardInterrupt), command_signals():
-            start = time.monotonic()
-            signal.raise_signal(signal.SIGINT)
-            while time.monotonic() - start < 5.0:
-                pass
-        assert time.monotonic() - start < 1.0
-    finally:
-        release.set()
-        thread.join(10.0)
+    """A thread that holds the global import lock (an import beside the command at a low
+    priority, starved on a loaded machine) does not make the main thread count as importing:
+    Ctrl-C is raised at once (in a fresh process), not when that thread lets go (5 s)."""
+    res = subprocess.run([sys.executable, "-c", _LOCK_HELD_CASE], env=_env(), capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, (res.returncode, res.stdout, res.stderr[-2000:])
+    assert res.stdout.strip() != "None" and float(res.stdout) < 1.0, res.stdout
 
 
 def test_the_import_machinery_counts_as_importing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
