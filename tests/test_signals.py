@@ -150,6 +150,26 @@ def test_another_thread_holding_the_import_lock_does_not_hold_back_a_signal() ->
     assert res.stdout.strip() != "None" and float(res.stdout) < 1.0, res.stdout
 
 
+_LATE_CASE = """
+import signal, time
+from bench_sim.io import interrupts
+from bench_sim.io.interrupts import command_signals
+with command_signals():
+    interrupts._redelivery().later(signal.SIGINT)  # deferred, as during an import
+time.sleep(0.5)  # the run is over: its signal is not sent again into what follows
+print("clean")
+"""
+
+
+def test_a_signal_deferred_as_a_run_ends_is_not_sent_into_what_follows() -> None:
+    """A signal deferred (during an import) just before an in-process run ends is dropped with
+    the run's handlers, not sent again into the caller (a notebook, the test process): there it
+    raised KeyboardInterrupt, or a SIGTERM killed the process, after the run had ended."""
+    res = subprocess.run([sys.executable, "-c", _LATE_CASE], env=_env(), capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0 and res.stdout.strip() == "clean", (res.returncode, res.stdout, res.stderr)
+
+
 def test_the_import_machinery_counts_as_importing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A frame seen from inside the import system (a finder on ``sys.meta_path``, called with
     the module locks of ``importlib._bootstrap`` around it) is importing; the test's own frame

@@ -128,7 +128,11 @@ class _Redelivery:
                 return
             time.sleep(REDELIVER_S)
             for signum in dict.fromkeys(data):
-                os.kill(self.pid, signum)
+                if getattr(signal.getsignal(signum), "bench_sim_handler", False):
+                    os.kill(self.pid, signum)
+                else:  # the run has ended meanwhile and its handlers are gone (a run in a
+                    # test or a notebook): the signal was for that run, not for what follows
+                    self.since.pop(signum, None)
 
     def later(self, signum: int) -> None:
         first = self.since.setdefault(signum, time.monotonic())
@@ -176,6 +180,7 @@ def _import_safe(redelivery: _Redelivery) -> Any:
         _RAISED.append(signum)
         raise signal_exception(signum)
 
+    handler.bench_sim_handler = True  # type: ignore[attr-defined]
     return handler
 
 
@@ -185,6 +190,9 @@ def _ignore_unraisable(unraisable: Any) -> None:
 
 def _late(signum: int, frame: FrameType | None) -> None:
     leave_now(signum, " as the command ended")
+
+
+_late.bench_sim_handler = True  # type: ignore[attr-defined]
 
 
 def _install(handler: Any) -> dict[int, Any]:
