@@ -255,6 +255,8 @@ def deferred_interrupts() -> Iterator[None]:
     def hold(signum: int, frame: Any) -> None:  # only records: safe at any bytecode
         held.append(signum)
 
+    hold.bench_sim_handler = True  # type: ignore[attr-defined]  # a redelivery may come here
+
     previous: dict[int, Any] = {}
     try:
         for sig in HELD_SIGNALS:
