@@ -48,6 +48,7 @@ from bench_sim.runtime.cluster import (
 from bench_sim.runtime.parallel import child_sequence
 
 __all__ = [
+    "check_workers",
     "TaskOutcome",
     "Shared",
     "task_seed_sequence",
@@ -191,6 +192,17 @@ def _run_one(func: Callable[..., Any], index: int, arg: Any, *shared: Any) -> Ta
             traceback.print_exc()
         return TaskOutcome(index, None, _one_line(exc), time.perf_counter() - t0, where)
     return TaskOutcome(index, value, None, time.perf_counter() - t0, where)
+
+
+def check_workers(workers: int | None, scheduler: str | None) -> None:
+    """Refuse ``--workers`` together with ``--scheduler`` and a negative ``--workers`` (one line
+    each, before any work): the options of a sweep's or a design's points."""
+    if workers is not None and scheduler is not None:
+        raise BenchSimError(
+            "--workers and --scheduler: give one of them (--scheduler uses that cluster's workers)"
+        )
+    if workers is not None and workers < 0:
+        raise BenchSimError(f"--workers = {workers}: must be >= 0 (0 runs in this process)")
 
 
 @contextlib.contextmanager

@@ -48,7 +48,13 @@ from bench_sim.io import OUTPUT_MARKER, atomic_path, write_json
 from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.measure.design_scores import word_config
-from bench_sim.runtime.execution import TaskOutcome, default_workers, open_client, run_tasks
+from bench_sim.runtime.execution import (
+    TaskOutcome,
+    check_workers,
+    default_workers,
+    open_client,
+    run_tasks,
+)
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.sensor.dtdi import frames_needed
 from bench_sim.workflows.design.objectives import Choice
@@ -321,15 +327,6 @@ def _workers(plan: DesignPlan, workers: int | None, scheduler: str | None) -> in
     return 0 if len(plan.todo) <= 1 else default_workers()
 
 
-def _check_workers(workers: int | None, scheduler: str | None) -> None:
-    if workers is not None and scheduler is not None:
-        raise BenchSimError(
-            "--workers and --scheduler: give one of them (--scheduler uses that cluster's workers)"
-        )
-    if workers is not None and workers < 0:
-        raise BenchSimError(f"--workers = {workers}: must be >= 0 (0 runs in this process)")
-
-
 def run_design(
     spec_path: str | Path,
     out: str | Path,
@@ -362,7 +359,7 @@ def run_design(
     on_point
         Called with each point's journal record as it is written (tests, monitoring).
     """
-    _check_workers(workers, scheduler)
+    check_workers(workers, scheduler)
     t0 = time.perf_counter()
     with folder_lock(Path(out).expanduser().resolve(), "design"):
         plan = plan_design(spec_path, out, resume=resume)

@@ -52,7 +52,7 @@ from bench_sim.io import OUTPUT_MARKER, write_json
 from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.io.strict_json import strict_json
-from bench_sim.runtime.execution import TaskOutcome, open_client, run_tasks
+from bench_sim.runtime.execution import TaskOutcome, check_workers, open_client, run_tasks
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import preflight_tasks
@@ -146,15 +146,6 @@ def _meta(
         sessions=sessions,
         **totals,
     )
-
-
-def _check_workers(workers: int | None, scheduler: str | None) -> None:
-    if workers is not None and scheduler is not None:
-        raise BenchSimError(
-            "--workers and --scheduler: give one of them (--scheduler uses that cluster's workers)"
-        )
-    if workers is not None and workers < 0:
-        raise BenchSimError(f"--workers = {workers}: must be >= 0 (0 runs in this process)")
 
 
 def _preflight(plan: SweepPlan, workers: int | None, scheduler: str | None, plots: bool) -> None:
@@ -303,7 +294,7 @@ def run_sweep(
     on_point
         Called in this process with each point's record as it is written.
     """
-    _check_workers(workers, scheduler)
+    check_workers(workers, scheduler)
     # one writer per folder: held from before the folder is read until its last file is written
     with folder_lock(Path(out).expanduser().resolve(), "sweep"):
         plan = plan_sweep(spec_path, out, resume=resume)
