@@ -7,6 +7,10 @@ status 130 (143), not a traceback and not a silent death. (The package itself,
 is imported, :func:`bench_sim.io.interrupts.own_process_signals` takes over: the signals raise
 their exception, never inside an import, and end the process at once after the command. The
 process then leaves with the command's status at once (:func:`_leave`).
+
+So importing this module makes the importing process ``bench-sim``'s own, as running it does: it
+is the program, not a library module (other code calls the workflows, or :mod:`bench_sim.cli`
+through typer's test runner).
 """
 
 from __future__ import annotations

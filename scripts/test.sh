@@ -17,12 +17,7 @@ install=$!
 status=0
 make --no-print-directory lint || status=$?
 if [ "$status" -eq 0 ]; then
-  .venv/bin/python -m pytest -n auto --dist loadfile --strict-skips -m "not stress" \
-    --ignore=tests/test_signals.py "$@" || status=$?
-  # the signal tests in a process of their own, after the others: in a shared xdist worker, the
-  # worker died at their start in about half of the full runs (cause not found; the file alone
-  # passes every time)
-  .venv/bin/python -m pytest --strict-skips -m "not stress" tests/test_signals.py || status=$?
+  .venv/bin/python -m pytest -n auto --dist loadfile --strict-skips -m "not stress" "$@" || status=$?
 fi
 if wait "$install"; then
   tail -n 1 "$log"

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import sys
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -26,6 +28,20 @@ pytest_plugins = ["pytester"]
 # processes the tests start (commands, Dask workers) inherit it. Tests of the store turn it on
 # with monkeypatch.
 os.environ.setdefault("BENCH_SIM_RECORD_CACHE", "off")
+
+
+@pytest.fixture(autouse=True)
+def _a_test_process_stays_one() -> Iterator[None]:
+    """No test makes the test process ``bench-sim``'s own. Importing the program module,
+    ``bench_sim.__main__``, does so by design (its signal handlers become the process's; after a
+    command, a signal ends the process at once with ``os._exit``): a test that imported it left
+    its xdist worker so, and a later test's own signal ended the worker without a word (the worker
+    that died in about half of the full runs). Commands are run as processes or through
+    ``bench_sim.cli``."""
+    yield
+    interrupts = sys.modules.get("bench_sim.io.interrupts")
+    assert "bench_sim.__main__" not in sys.modules and not getattr(interrupts, "_OWN_PROCESS", False), (
+        "this test made the test process bench-sim's own (it imported bench_sim.__main__)")
 
 
 def make_cfg(**sections: Any) -> BenchConfig:

@@ -116,7 +116,25 @@ def test_architecture_doc_matches_the_tree() -> None:
     assert not gone, f"docs/architecture.md names paths that do not exist: {gone}"
 
 
+#: the program's entry module: importing it starts the command line's process set-up (its signal
+#: handlers become the importing process's own), so it is read, never imported, here
+PROGRAM = "bench_sim.__main__"
+
+
+def _program_has(names: list[str]) -> bool:
+    """Whether :data:`PROGRAM` defines ``names[0]`` at its top level (read from its source)."""
+    spec = importlib.util.find_spec(PROGRAM)
+    assert spec is not None and spec.origin is not None
+    tree = ast.parse(Path(spec.origin).read_text())
+    defined = {n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    defined |= {t.id for n in tree.body if isinstance(n, ast.Assign)
+                for t in n.targets if isinstance(t, ast.Name)}
+    return len(names) <= 1 and (not names or names[0] in defined)
+
+
 def _resolves(dotted: str) -> bool:
+    if dotted == PROGRAM or dotted.startswith(PROGRAM + "."):
+        return _program_has(dotted[len(PROGRAM) + 1:].split(".") if dotted != PROGRAM else [])
     parts = dotted.split(".")
     for i in range(len(parts), 0, -1):
         try:
@@ -179,6 +197,8 @@ def _dotted_name_ok(name: str, config: set[str]) -> bool:
     ("experiments.execution.task_seed_sequence", False),  # a module that no longer exists
     ("runtime.execution.task_seed_sequence", True),
     ("bench_sim.runtime.execution.no_such_name", False),
+    ("bench_sim.__main__.main", True),  # the program: read, not imported
+    ("bench_sim.__main__.no_such_name", False),
     ("lights.strong.irradiance_w_m2", True),
     ("lights.strong.flux", False),
     ("sensor.effects.knee.compression", True),  # a key of a sensor effect
