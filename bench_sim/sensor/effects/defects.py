@@ -48,6 +48,7 @@ __all__ = ["EFFECT", "Defects", "KINDS"]
 
 #: the kinds of defect pixel, in the order their rates partition ``[0, 1)``, and their code
 KINDS = ("hot", "warm", "cold", "stuck", "rts")
+#: a kind's rate: at most 0.1, so the five add up to at most 0.5 and always partition ``[0, 1)``
 Rate = Annotated[float, Field(ge=0, le=0.1)]
 
 
@@ -104,11 +105,6 @@ class Defects(Effect):
             raise BenchSimError(
                 f"config error: sensor.effects.{name}.stuck_value_dn = {params.stuck_value_dn}: "
                 f"above the ADC's top ({top} DN)"
-            )
-        total = sum(getattr(params, f"{k}_rate") for k in KINDS)
-        if total > 0.5:
-            raise BenchSimError(
-                f"config error: sensor.effects.{name}: the rates add up to {total:g}; at most 0.5"
             )
         self.map = None if params.map_file is None else self._read_map(Path(params.map_file))
 

@@ -118,6 +118,14 @@ def test_a_stuck_value_above_the_adc_top_is_refused():
         sensor_chain(SensorConfig(adc_bits=9, effects={"d": {"kind": "defects", "stuck_value_dn": 600}}))
 
 
+@pytest.mark.parametrize("kind", KINDS)
+def test_a_rate_above_a_tenth_is_refused_naming_it(kind: str) -> None:
+    """Each rate is at most 0.1, so the five always partition ``[0, 1)`` (at most 0.5 in all)."""
+    said = rf"sensor\.effects\.d\.{kind}_rate = 0\.11: .*less than or equal to 0\.1"
+    with pytest.raises(BenchSimError, match=said):
+        sensor_chain(SensorConfig(effects={"d": {"kind": "defects", f"{kind}_rate": 0.11}}))
+
+
 # --- the truth, one read at a time ----------------------------------------------------------------
 
 
