@@ -70,6 +70,7 @@ from bench_sim.workflows.design.objectives import (
 )
 from bench_sim.workflows.preflight import SEED_RULE, is_seed
 from bench_sim.workflows.simulate import parse_stages_arg
+from bench_sim.workflows.spec_grid import grid_as_dict
 from bench_sim.workflows.sweep.spec import (
     MODES,
     NOISE,
@@ -162,16 +163,7 @@ class DesignSpec:
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready description (``design.json``'s ``spec``)."""
         return {
-            "path": str(self.path),
-            "name": self.name,
-            "description": self.description,
-            "mode": self.mode,
-            "noise": self.noise,
-            "seed": self.seed,
-            "quick": self.quick,
-            "keys": list(self.keys),
-            "values": {k: list(v) for k, v in self.values.items()},
-            "points": len(self.points),
+            **grid_as_dict(self),
             "pairs": len(self.space.pairs),
             "triples": [list(t) for t in self.space.triples],
             "rules": list(self.space.rules),

@@ -78,6 +78,7 @@ from bench_sim.errors import BenchSimError
 from bench_sim.io.input_files import input_file_problem
 from bench_sim.sensor.effects.chain import effect_kinds
 from bench_sim.workflows.preflight import SEED_RULE, is_seed
+from bench_sim.workflows.spec_grid import grid_as_dict
 from bench_sim.workflows.sweep.light_keys import LIGHTING_KEYS, adds_light, check_banding_stages, check_ratio
 
 __all__ = [
@@ -217,19 +218,7 @@ class SweepSpec:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready description (``sweep.json``'s ``spec``)."""
-        return {
-            "path": str(self.path),
-            "name": self.name,
-            "description": self.description,
-            "mode": self.mode,
-            "noise": self.noise,
-            "seed": self.seed,
-            "quick": self.quick,
-            "keys": list(self.keys),
-            "values": {k: list(v) for k, v in self.values.items()},
-            "points": len(self.points),
-            "raw": self.raw,
-        }
+        return {**grid_as_dict(self), "raw": self.raw}
 
 
 def _err(spec: Path, msg: str) -> BenchSimError:
