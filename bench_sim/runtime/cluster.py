@@ -23,13 +23,16 @@ misleading message:
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import gc
 import logging
 import os
 import re
 import signal
 import socket
 import struct
+import threading
 import time
 import warnings
 from collections.abc import Iterator
@@ -37,6 +40,7 @@ from typing import Any
 
 from bench_sim.errors import BenchSimError, ClusterError
 from bench_sim.io.interrupts import deferred_interrupts
+from bench_sim.runtime.preload import import_in_background
 
 __all__ = [
     "SCHEMES",
@@ -45,6 +49,7 @@ __all__ = [
     "wait_for_workers",
     "quiet_local_cluster",
     "quiet_dask_logs",
+    "close_in_background",
 ]
 
 #: Address schemes of a Dask scheduler bench_sim accepts (``HOST:PORT`` alone means ``tcp://``)
@@ -187,11 +192,24 @@ def _own_process_group() -> None:
         os.setpgid(0, 0)
 
 
+def _prepare_worker(preload: tuple[str, ...] = ()) -> None:
+    """Run in each worker process of a local cluster as it starts: its own process group
+    (:func:`_own_process_group`), the modules its tasks need imported on a thread while the
+    client prepares them (``preload``), and a quick exit. At its exit the interpreter's last garbage
+    collection walks every object the run's imports made (Mitsuba, xarray, numba: ~1 s per
+    worker, which the cluster's close waits for); ``gc.freeze`` at exit leaves those out. The
+    worker's tasks and their files are closed by then, and its memory goes back with the process."""
+    _own_process_group()
+    if preload:
+        import_in_background(preload, nice=0)
+    atexit.register(gc.freeze)
+
+
 @contextlib.contextmanager
-def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
+def quiet_local_cluster(n_workers: int, preload: tuple[str, ...] = ()) -> Iterator[Any]:
     """A ``LocalCluster`` of ``n_workers`` one-thread processes and its client, closed in order
     (client, then cluster: no unclosed socket); its workers ignore Ctrl-C (see the module
-    docstring) and log only errors."""
+    docstring), log only errors and import ``preload`` (module names) as soon as they start."""
     from distributed import Client, LocalCluster
 
     with warnings.catch_warnings():
@@ -217,7 +235,7 @@ def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
                         env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
                     )
                 client = Client(cluster)
-                client.run(_own_process_group)  # in every worker of the cluster
+                client.run(_prepare_worker, preload)  # in every worker of the cluster
         except BaseException:
             if cluster is not None:
                 _close_quietly(client, cluster)
@@ -225,7 +243,29 @@ def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
     try:
         yield client
     finally:
-        _close_quietly(client, cluster)
+        closer = _CLOSERS.pop(id(client), None)
+        if closer is None:
+            _close_quietly(client, cluster)
+        else:  # started by close_in_background: wait for it
+            closer.join()
+
+
+#: background closes started by :func:`close_in_background`, by ``id`` of their client
+_CLOSERS: dict[int, threading.Thread] = {}
+
+
+def close_in_background(client: Any) -> None:
+    """Start closing the client of a :func:`quiet_local_cluster` (then its cluster) on a thread
+    of its own: the caller's last writes run while the workers stop (a close waits ~1 s for the
+    worker processes to exit). The ``with`` block's end waits for the close. Nothing for any
+    other client (a ``--scheduler`` cluster's is closed at the block's end)."""
+    cluster = getattr(client, "cluster", None)
+    if client is None or cluster is None or id(client) in _CLOSERS:
+        return
+    thread = threading.Thread(target=_close_quietly, args=(client, cluster), name="bench_sim-close",
+                              daemon=True)
+    _CLOSERS[id(client)] = thread
+    thread.start()
 
 
 @contextlib.contextmanager

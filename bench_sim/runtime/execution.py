@@ -40,6 +40,7 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError, ClusterError
 from bench_sim.runtime.cluster import (
+    close_in_background,
     probe_scheduler,
     quiet_dask_logs,
     quiet_local_cluster,
@@ -54,6 +55,7 @@ __all__ = [
     "task_seed_sequence",
     "task_generator",
     "open_client",
+    "release_client",
     "run_tasks",
     "worker_cache",
     "default_workers",
@@ -207,7 +209,8 @@ def check_workers(workers: int | None, scheduler: str | None) -> None:
 
 @contextlib.contextmanager
 def open_client(
-    workers: int | None = None, scheduler: str | None = None, *, connect_timeout_s: float | None = None
+    workers: int | None = None, scheduler: str | None = None, *, connect_timeout_s: float | None = None,
+    preload: Sequence[str] = (),
 ) -> Iterator[Any]:
     """A ``dask.distributed.Client`` for a run; ``None`` for in-process execution.
 
@@ -224,6 +227,10 @@ def open_client(
     connect_timeout_s
         How long to wait for the scheduler's handshake [s] before giving up with a one-line
         error (default: ``BENCH_SIM_CONNECT_TIMEOUT_S``, else 10 s).
+    preload
+        Modules the tasks will need (dotted names, e.g. the task function's module): the workers
+        of a new local cluster import them as soon as they start, while this process prepares
+        the tasks (:mod:`bench_sim.runtime.preload`).
 
     Notes
     -----
@@ -234,10 +241,20 @@ def open_client(
         yield None
         return
     with quiet_dask_logs():
-        yield from _client(workers, scheduler, connect_timeout_s)
+        yield from _client(workers, scheduler, connect_timeout_s, tuple(preload))
 
 
-def _client(workers: int | None, scheduler: str | None, connect_timeout_s: float | None) -> Iterator[Any]:
+def release_client(client: Any) -> None:
+    """Every task of the run is done: a local cluster from :func:`open_client` starts closing on
+    a thread of its own, so the caller writes its outputs while the worker processes stop, off
+    the critical path; the ``with open_client(...)`` block's end waits for the close to finish.
+    Nothing for ``None`` (in-process runs) or a ``--scheduler`` cluster."""
+    close_in_background(client)
+
+
+def _client(
+    workers: int | None, scheduler: str | None, connect_timeout_s: float | None, preload: tuple[str, ...]
+) -> Iterator[Any]:
     """:func:`open_client`'s body for a cluster (a generator for ``yield from``)."""
     if scheduler is not None:
         timeout = connect_timeout_s if connect_timeout_s is not None else _env_seconds(
@@ -262,7 +279,7 @@ def _client(workers: int | None, scheduler: str | None, connect_timeout_s: float
     n = default_workers() if workers is None else int(workers)
     if n < 0:
         raise BenchSimError(f"--workers = {n}: must be >= 0 (0 runs in this process)")
-    with quiet_local_cluster(n) as client:
+    with quiet_local_cluster(n, preload) as client:
         yield client
 
 

@@ -9,6 +9,7 @@ from bench_sim.errors import BenchSimError
 from bench_sim.runtime.execution import (
     Shared,
     open_client,
+    release_client,
     run_tasks,
     task_generator,
     task_seed_sequence,
@@ -118,3 +119,15 @@ def test_shared_inputs_made_once_per_key_in_and_out_of_dask() -> None:
         there = run_tasks(_add, args, client=client, shared=_shared_for(args))
     assert [(o.value, o.error) for o in there] == [(o.value, o.error) for o in here]
     assert all(o.ok for o in there[:5])
+
+
+@pytest.mark.slow
+def test_a_released_cluster_closes_on_its_own_thread_and_is_closed_when_the_block_ends() -> None:
+    with open_client(workers=1) as client:
+        assert run_tasks(_draw, [(5, 0)], client=client)[0].ok
+        cluster = client.cluster
+        release_client(client)
+        release_client(client)  # a second call changes nothing
+        release_client(None)  # nor one for in-process runs
+    assert client.status == "closed"
+    assert cluster.status.name == "closed"

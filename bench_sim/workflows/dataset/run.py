@@ -54,7 +54,8 @@ from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dyna
 from bench_sim.pipeline import physical_coords, run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
-from bench_sim.runtime.execution import Shared, TaskOutcome, open_client, run_tasks
+from bench_sim.runtime.execution import Shared, TaskOutcome, open_client, release_client, run_tasks
+from bench_sim.runtime.preload import FIGURES, import_in_background
 from bench_sim.runtime.progress import ProgressBar, progress_bar
 from bench_sim.sensor.model import stage_mean_var_dn
 from bench_sim.workflows.dataset.card import write_card
@@ -406,9 +407,9 @@ def _plan_and_run(
     plan = _plan(spec_path, out, workers, scheduler, resume, only)
     spec, out = plan.spec, plan.out
     run = DatasetRun(out=out, samples=spec.samples)
-    # the execution layer first: a scheduler that cannot be reached (or a cluster that cannot
-    # start) is refused before anything is laid out at --out
-    cluster = open_client(workers=workers, scheduler=scheduler) if plan.todo else contextlib.nullcontext()
+    # the execution layer first (refused before anything is laid out at --out if it cannot start)
+    cluster = contextlib.nullcontext() if not plan.todo else open_client(  # the workers import this
+        workers=workers, scheduler=scheduler, preload=(__name__, "dask.array"))  # module at once
     laid_out = False
     try:
         with cluster as client:
@@ -420,11 +421,14 @@ def _plan_and_run(
             if not plan.todo:
                 run.complete = len(plan.done_before)
             else:
+                if client is not None:  # on workers: this process imports what it writes with meanwhile
+                    import_in_background(("xarray", "zarr", "pyarrow", *FIGURES))
                 writer = _run_samples(plan, client, meta, progress)
                 run.ran, run.failed = writer.ran, writer.failed
                 run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
-        df = write_manifest(out, spec, meta, plan.values)
-        write_card(out, spec, df, command=command, provenance=meta)
+            release_client(client)  # the cluster closes while the manifest and card are written
+            df = write_manifest(out, spec, meta, plan.values)
+            write_card(out, spec, df, command=command, provenance=meta)
         if run.complete == spec.samples:
             write_json(out / COMPLETION_RECORD, {
                 "command": "dataset", "version": meta["version"], "seed": spec.seed,

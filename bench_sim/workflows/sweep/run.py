@@ -52,7 +52,8 @@ from bench_sim.io import OUTPUT_MARKER, write_json
 from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.io.strict_json import strict_json
-from bench_sim.runtime.execution import TaskOutcome, check_workers, open_client, run_tasks
+from bench_sim.runtime.execution import TaskOutcome, check_workers, open_client, release_client, run_tasks
+from bench_sim.runtime.preload import FIGURES, import_in_background
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import preflight_tasks
@@ -86,6 +87,10 @@ __all__ = [
     "read_points",
     "spec_sha256",
 ]
+
+
+#: what the outputs are written with (``sweep.nc``: xarray, which asks for Dask's arrays, and netCDF4)
+WRITE_MODULES = ("xarray", "dask.array", "netCDF4")
 
 
 @dataclass
@@ -241,17 +246,22 @@ def _run_and_write(
     opened = False
     # the cluster is reached (or started) before anything is written: an unreachable scheduler
     # leaves no output behind
-    cluster = open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext()
+    cluster = contextlib.nullcontext() if not todo else open_client(  # the workers import the point module
+        workers=workers, scheduler=scheduler, preload=(measure_point.__module__, "dask.array"))  # at once
     try:
         with cluster as client:
             sessions, records = _open_folder(plan, workers, scheduler)
             opened = True
+            if client is not None:  # the points run on workers: this process imports what it writes with
+                import_in_background(WRITE_MODULES + (FIGURES if plots else ()))
             if todo:
                 _run_points(plan, client, records, progress, on_point)
-        totals = _totals(plan, records)
-        write_outputs(plan.out, plan, records, sessions, plots=plots)
-        write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
-                                                  "complete_with_failures", sessions, totals))
+            release_client(client)  # the cluster closes while the outputs are written
+            totals = _totals(plan, records)
+            write_outputs(plan.out, plan, records, sessions, plots=plots)
+            write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
+                                                      "complete_with_failures", sessions, totals))
+        # the completion record once the cluster is closed: last, as before
         write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals,
                                               "files": entries(plan.out)})
     except BaseException as exc:
