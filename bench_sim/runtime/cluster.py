@@ -40,7 +40,6 @@ from typing import Any
 
 from bench_sim.errors import BenchSimError, ClusterError
 from bench_sim.io.interrupts import deferred_interrupts
-from bench_sim.runtime.preload import import_in_background
 
 __all__ = [
     "SCHEMES",
@@ -192,24 +191,23 @@ def _own_process_group() -> None:
         os.setpgid(0, 0)
 
 
-def _prepare_worker(preload: tuple[str, ...] = ()) -> None:
+def _prepare_worker() -> None:
     """Run in each worker process of a local cluster as it starts: its own process group
-    (:func:`_own_process_group`), the modules its tasks need imported on a thread while the
-    client prepares them (``preload``), and a quick exit. At its exit the interpreter's last garbage
+    (:func:`_own_process_group`) and a quick exit. At its exit the interpreter's last garbage
     collection walks every object the run's imports made (Mitsuba, xarray, numba: ~1 s per
     worker, which the cluster's close waits for); ``gc.freeze`` at exit leaves those out. The
-    worker's tasks and their files are closed by then, and its memory goes back with the process."""
+    worker's tasks and their files are closed by then, and its memory goes back with the process.
+    Nothing is imported here on a thread of its own meanwhile (see :mod:`bench_sim.runtime.preload`
+    for why): a worker imports what its tasks need as it runs them."""
     _own_process_group()
-    if preload:
-        import_in_background(preload, nice=0)
     atexit.register(gc.freeze)
 
 
 @contextlib.contextmanager
-def quiet_local_cluster(n_workers: int, preload: tuple[str, ...] = ()) -> Iterator[Any]:
+def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
     """A ``LocalCluster`` of ``n_workers`` one-thread processes and its client, closed in order
     (client, then cluster: no unclosed socket); its workers ignore Ctrl-C (see the module
-    docstring), log only errors and import ``preload`` (module names) as soon as they start."""
+    docstring) and log only errors."""
     from distributed import Client, LocalCluster
 
     with warnings.catch_warnings():
@@ -235,7 +233,7 @@ def quiet_local_cluster(n_workers: int, preload: tuple[str, ...] = ()) -> Iterat
                         env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
                     )
                 client = Client(cluster)
-                client.run(_prepare_worker, preload)  # in every worker of the cluster
+                client.run(_prepare_worker)  # in every worker of the cluster
         except BaseException:
             if cluster is not None:
                 _close_quietly(client, cluster)
@@ -255,17 +253,31 @@ _CLOSERS: dict[int, threading.Thread] = {}
 
 
 def close_in_background(client: Any) -> None:
-    """Start closing the client of a :func:`quiet_local_cluster` (then its cluster) on a thread
-    of its own: the caller's last writes run while the workers stop (a close waits ~1 s for the
-    worker processes to exit). The ``with`` block's end waits for the close. Nothing for any
-    other client (a ``--scheduler`` cluster's is closed at the block's end)."""
+    """Close the client of a :func:`quiet_local_cluster` now, then start closing its cluster on
+    a thread of its own: the caller's last writes run while the workers stop (a close waits for
+    the worker processes to exit). The ``with`` block's end waits for the close. Nothing for any
+    other client (a ``--scheduler`` cluster's is closed at the block's end).
+
+    The client is closed here, in the caller's thread, before its writes: while a client is
+    open it is Dask's default scheduler, and xarray then writes a file under a lock of the
+    cluster's (``dask.distributed.Lock``): a write racing the close fails, and leaves xarray's
+    own HDF5 lock held (the next netCDF write of the process waits for ever). The thread only
+    closes the cluster, and sets no process-wide state (a ``warnings.catch_warnings`` there
+    would race the caller's filters): the caller's ``open_client`` block keeps Dask's logs quiet
+    until the close is joined."""
     cluster = getattr(client, "cluster", None)
     if client is None or cluster is None or id(client) in _CLOSERS:
         return
-    thread = threading.Thread(target=_close_quietly, args=(client, cluster), name="bench_sim-close",
-                              daemon=True)
+    _close_quietly(client, None)
+    thread = threading.Thread(target=_close_cluster, args=(cluster,), name="bench_sim-close", daemon=True)
     _CLOSERS[id(client)] = thread
     thread.start()
+
+
+def _close_cluster(cluster: Any) -> None:
+    """Close a local cluster, ignoring its errors (on :func:`close_in_background`'s thread)."""
+    with contextlib.suppress(Exception):
+        cluster.close(timeout=10)
 
 
 @contextlib.contextmanager
@@ -290,11 +302,11 @@ def quiet_dask_logs() -> Iterator[None]:
 
 
 def _close_quietly(client: Any, cluster: Any) -> None:
-    """Close the client, then the cluster, with the shutdown's own log lines silenced."""
+    """Close the client, then the cluster (if any), with the shutdown's own log lines silenced."""
     with quiet_dask_logs(), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if client is not None:
             with contextlib.suppress(Exception):
                 client.close(timeout=10)
-        with contextlib.suppress(Exception):
-            cluster.close(timeout=10)
+        if cluster is not None:
+            _close_cluster(cluster)

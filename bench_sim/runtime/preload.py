@@ -1,47 +1,37 @@
-"""Libraries a command will need at its end, imported beforehand on a low-priority thread.
+"""Libraries a command will need at its end, imported while its tasks run on a cluster.
 
-A sweep or a dataset writes its tables, stores and figures in the client process once every
-point has run on the cluster's workers; importing xarray, Dask's arrays and matplotlib then
-(~1 s) would lengthen the run's tail. :func:`import_in_background` imports them while the
-points run, on a daemon thread of the lowest CPU priority (``nice`` 19 for that thread alone on
-Linux), so it takes the time the workers leave over, not theirs. An import the command then
-makes waits for the thread's (Python's import lock) and finds the module ready; an import that
-fails here is left for the command's own import to report.
+A sweep or a dataset writes its tables, stores and figures in the client process; importing
+xarray, Dask's arrays, netCDF4, Zarr and matplotlib when the last task is done (~1 s) would
+lengthen the run's tail. :func:`import_modules` imports them in the client's own thread once
+the tasks are on the cluster's workers (:func:`bench_sim.runtime.execution.run_tasks`'
+``meanwhile``), while it would otherwise only wait for the first result.
+
+Never on a thread of its own: on CPython 3.11 the conversion of a parsed tree to Python objects
+(``ast.parse``) keeps its recursion depth in state the interpreter's threads share, and a
+thread switch inside it (a garbage collection running a finaliser) makes the ``ast.parse`` of
+another thread fail with ``SystemError: AST constructor recursion depth mismatch``
+(python/cpython#106905). Imports parse: ``inspect.signature`` of builtins, matplotlib's
+rc validators, Dr.Jit's ``@dr.syntax`` (Mitsuba's ``set_variant``). A worker that imported the
+point's modules on a thread while its first task set Mitsuba's variant failed every point of
+the run that way (a shared input's ``SystemError``), so the imports run in the thread that
+needs them, one after the other.
 """
 
 from __future__ import annotations
 
 import contextlib
 import importlib
-import os
-import threading
 from collections.abc import Iterable
 
-__all__ = ["FIGURES", "import_in_background"]
+__all__ = ["FIGURES", "import_modules"]
 
 #: what bench_sim's figures are drawn with (matplotlib's figure and its Agg canvas, no GUI)
 FIGURES = ("matplotlib.figure", "matplotlib.backends.backend_agg")
 
-#: ``nice`` of the importing thread (the lowest priority)
-NICE = 19
 
-
-def import_in_background(modules: Iterable[str], nice: int = NICE) -> threading.Thread:
-    """Import ``modules`` (dotted names), in order, on a daemon thread of CPU priority ``nice``
-    (default the lowest; ``0``: the process's own, for a process that has nothing else to do
-    meanwhile, such as a cluster's worker before its first task); returns the thread (started).
-    Nothing is required of the caller: its own imports of the same modules find them done or
-    wait for them."""
-    names = list(modules)
-
-    def run() -> None:
-        with contextlib.suppress(AttributeError, OSError):  # only this thread (Linux: per-thread nice)
-            if nice:
-                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
-        for name in names:
-            with contextlib.suppress(Exception):  # the command's own import says what is wrong
-                importlib.import_module(name)
-
-    thread = threading.Thread(target=run, name="bench_sim-preload", daemon=True)
-    thread.start()
-    return thread
+def import_modules(modules: Iterable[str]) -> None:
+    """Import ``modules`` (dotted names), in order, in this thread; a module that fails to
+    import is left for the command's own import to report (its error is not raised here)."""
+    for name in modules:
+        with contextlib.suppress(Exception):
+            importlib.import_module(name)

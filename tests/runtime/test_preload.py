@@ -1,4 +1,4 @@
-"""Libraries imported beforehand on a low-priority thread (bench_sim.runtime.preload)."""
+"""Libraries imported while a run's tasks are on a cluster (bench_sim.runtime.preload)."""
 
 from __future__ import annotations
 
@@ -6,28 +6,26 @@ import sys
 
 import pytest
 
-from bench_sim.runtime.preload import FIGURES, import_in_background
+from bench_sim.runtime.preload import FIGURES, import_modules
 
 
 @pytest.mark.parametrize("name", ["colorsys", "json.tool"])
-def test_a_module_is_imported_once_the_thread_ends(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_module_is_imported(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delitem(sys.modules, name, raising=False)
-    import_in_background([name]).join(timeout=60)
+    import_modules([name])
     assert name in sys.modules
 
 
 def test_a_module_that_fails_is_left_and_the_next_one_still_imported(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delitem(sys.modules, "colorsys", raising=False)
-    thread = import_in_background(["bench_sim_no_such_module", "colorsys"])
-    thread.join(timeout=60)
-    assert not thread.is_alive()
+    import_modules(["bench_sim_no_such_module", "colorsys"])
     assert "bench_sim_no_such_module" not in sys.modules
     assert "colorsys" in sys.modules
 
 
 def test_the_figure_modules_draw_without_a_gui() -> None:
     """What is preloaded for figures is matplotlib's Agg canvas, never a GUI backend."""
-    import_in_background(FIGURES).join(timeout=120)
+    import_modules(FIGURES)
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

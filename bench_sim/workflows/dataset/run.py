@@ -55,7 +55,7 @@ from bench_sim.pipeline import physical_coords, run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
 from bench_sim.runtime.execution import Shared, TaskOutcome, open_client, release_client, run_tasks
-from bench_sim.runtime.preload import FIGURES, import_in_background
+from bench_sim.runtime.preload import FIGURES, import_modules
 from bench_sim.runtime.progress import ProgressBar, progress_bar
 from bench_sim.sensor.model import stage_mean_var_dn
 from bench_sim.workflows.dataset.card import write_card
@@ -97,6 +97,9 @@ __all__ = [
     "run_dataset",
     "manifest_frame",
 ]
+
+#: what the samples, the manifest and the card are written with (imported while samples run)
+WRITE_MODULES = ("xarray", "zarr", "pyarrow", *FIGURES)
 
 #: Seconds between manifest rewrites during a run
 MANIFEST_EVERY_S = 10.0
@@ -340,7 +343,8 @@ def _scene_values(values: dict[str, Any]) -> dict[str, float]:
 
 def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool) -> _SampleWriter:
     """Make the samples to do, writing each as it completes; the manifest of what is on disk
-    is written if the run stops (Ctrl-C, a lost scheduler)."""
+    is written if the run stops (Ctrl-C, a lost scheduler). While the samples run on workers,
+    this process imports what it writes with (:data:`WRITE_MODULES`)."""
     spec, todo = plan.spec, plan.todo
     camera_seed = spec.seed if spec.camera == "fixed" else None
     tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1], camera_seed,
@@ -351,7 +355,8 @@ def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool)
         writer = _SampleWriter(plan.out, spec, plan.values, meta, bar)
         try:
             run_tasks(make_sample, tasks, client=client, indices=todo, keep_values=False,
-                      on_result=writer.write, shared=sample_inputs(tasks))
+                      on_result=writer.write, shared=sample_inputs(tasks),
+                      meanwhile=lambda: import_modules(WRITE_MODULES))
         except BaseException:
             write_manifest(plan.out, spec, meta, plan.values)  # what is on disk now
             raise
@@ -408,8 +413,7 @@ def _plan_and_run(
     spec, out = plan.spec, plan.out
     run = DatasetRun(out=out, samples=spec.samples)
     # the execution layer first (refused before anything is laid out at --out if it cannot start)
-    cluster = contextlib.nullcontext() if not plan.todo else open_client(  # the workers import this
-        workers=workers, scheduler=scheduler, preload=(__name__, "dask.array"))  # module at once
+    cluster = open_client(workers=workers, scheduler=scheduler) if plan.todo else contextlib.nullcontext()
     laid_out = False
     try:
         with cluster as client:
@@ -421,8 +425,6 @@ def _plan_and_run(
             if not plan.todo:
                 run.complete = len(plan.done_before)
             else:
-                if client is not None:  # on workers: this process imports what it writes with meanwhile
-                    import_in_background(("xarray", "zarr", "pyarrow", *FIGURES))
                 writer = _run_samples(plan, client, meta, progress)
                 run.ran, run.failed = writer.ran, writer.failed
                 run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")

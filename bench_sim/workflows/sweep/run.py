@@ -53,7 +53,7 @@ from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.io.strict_json import strict_json
 from bench_sim.runtime.execution import TaskOutcome, check_workers, open_client, release_client, run_tasks
-from bench_sim.runtime.preload import FIGURES, import_in_background
+from bench_sim.runtime.preload import FIGURES, import_modules
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import preflight_tasks
@@ -198,9 +198,10 @@ def _open_folder(
 
 def _run_points(
     plan: SweepPlan, client: Any, records: dict[int, dict[str, Any]], progress: bool,
-    on_point: Callable[[dict[str, Any]], None] | None,
+    on_point: Callable[[dict[str, Any]], None] | None, plots: bool,
 ) -> None:
-    """Run the points still to do; journal each record, rewrite ``points.csv`` as it arrives."""
+    """Run the points still to do; journal each record, rewrite ``points.csv`` as it arrives.
+    While the points run on workers, this process imports what the outputs are written with."""
     todo = plan.todo
     points = journal(plan.out)
     with progress_bar("sweep", len(todo), "points", enabled=progress) as bar:
@@ -217,7 +218,7 @@ def _run_points(
         shared, counting = point_inputs(todo)
         args = [replace(t, count_records=t.index in counting) for t in todo]
         run_tasks(measure_point, args, client=client, indices=[t.index for t in todo], on_result=done,
-                  shared=shared)
+                  shared=shared, meanwhile=lambda: import_modules(WRITE_MODULES + (FIGURES if plots else ())))
 
 
 def _totals(plan: SweepPlan, records: dict[int, dict[str, Any]]) -> dict[str, Any]:
@@ -246,16 +247,13 @@ def _run_and_write(
     opened = False
     # the cluster is reached (or started) before anything is written: an unreachable scheduler
     # leaves no output behind
-    cluster = contextlib.nullcontext() if not todo else open_client(  # the workers import the point module
-        workers=workers, scheduler=scheduler, preload=(measure_point.__module__, "dask.array"))  # at once
+    cluster = open_client(workers=workers, scheduler=scheduler) if todo else contextlib.nullcontext()
     try:
         with cluster as client:
             sessions, records = _open_folder(plan, workers, scheduler)
             opened = True
-            if client is not None:  # the points run on workers: this process imports what it writes with
-                import_in_background(WRITE_MODULES + (FIGURES if plots else ()))
             if todo:
-                _run_points(plan, client, records, progress, on_point)
+                _run_points(plan, client, records, progress, on_point, plots)
             release_client(client)  # the cluster closes while the outputs are written
             totals = _totals(plan, records)
             write_outputs(plan.out, plan, records, sessions, plots=plots)
