@@ -32,3 +32,18 @@ def test_the_figure_modules_draw_without_a_gui() -> None:
     canvas = FigureCanvasAgg(Figure(figsize=(1, 1)))
     canvas.draw()
     assert canvas.buffer_rgba().shape[2] == 4
+
+
+def test_the_modules_are_imported_in_the_callers_thread(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Never on a thread of their own (CPython 3.11's ``ast.parse`` races another thread's: see
+    the module docstring): the module body runs in this thread, and is done on return."""
+    import threading
+
+    (tmp_path / "bench_sim_probe_module.py").write_text(
+        "import threading\nTHREAD = threading.current_thread().name\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "bench_sim_probe_module", raising=False)
+    before = threading.active_count()
+    import_modules(["bench_sim_probe_module"])
+    assert sys.modules["bench_sim_probe_module"].THREAD == threading.current_thread().name
+    assert threading.active_count() == before

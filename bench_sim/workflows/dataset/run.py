@@ -100,7 +100,6 @@ __all__ = [
 
 #: what the samples, the manifest and the card are written with (imported while samples run)
 WRITE_MODULES = ("xarray", "zarr", "pyarrow", *FIGURES)
-
 #: Seconds between manifest rewrites during a run
 MANIFEST_EVERY_S = 10.0
 
@@ -342,9 +341,8 @@ def _scene_values(values: dict[str, Any]) -> dict[str, float]:
 
 
 def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool) -> _SampleWriter:
-    """Make the samples to do, writing each as it completes; the manifest of what is on disk
-    is written if the run stops (Ctrl-C, a lost scheduler). While the samples run on workers,
-    this process imports what it writes with (:data:`WRITE_MODULES`)."""
+    """Make the samples to do, writing each as it completes (:data:`WRITE_MODULES` imported meanwhile);
+    the manifest of what is on disk is written if the run stops (Ctrl-C, a lost scheduler)."""
     spec, todo = plan.spec, plan.todo
     camera_seed = spec.seed if spec.camera == "fixed" else None
     tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1], camera_seed,
