@@ -94,11 +94,13 @@ def fast_records(cfg: BenchConfig) -> LightRecords:
     rendered now), ready to hand to other processes (:func:`bench_sim.render.records.install_records`).
 
     A pass of any config of the same :func:`records_group` on the same machine then finds them
-    in its process's cache instead of rendering them.
+    in its process's cache instead of rendering them. Records this process holds or the disk
+    store has need no Mitsuba (it is not imported).
     """
     check_fast_engine_valid(cfg)
-    mi, choice = _mitsuba(cfg)
-    rec, _ = light_records(mi, cfg, rig_geometry(cfg), choice.variant)
+    mi, choice, rec = _backend(cfg, "fast")  # held already (or in the disk store): no Mitsuba
+    if rec is None:
+        rec, _ = light_records(mi, cfg, rig_geometry(cfg), choice.variant)
     return rec.shareable()
 
 

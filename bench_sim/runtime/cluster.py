@@ -23,13 +23,16 @@ misleading message:
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import gc
 import logging
 import os
 import re
 import signal
 import socket
 import struct
+import threading
 import time
 import warnings
 from collections.abc import Iterator
@@ -45,6 +48,7 @@ __all__ = [
     "wait_for_workers",
     "quiet_local_cluster",
     "quiet_dask_logs",
+    "close_in_background",
 ]
 
 #: Address schemes of a Dask scheduler bench_sim accepts (``HOST:PORT`` alone means ``tcp://``)
@@ -187,6 +191,18 @@ def _own_process_group() -> None:
         os.setpgid(0, 0)
 
 
+def _prepare_worker() -> None:
+    """Run in each worker process of a local cluster as it starts: its own process group
+    (:func:`_own_process_group`) and a quick exit. At its exit the interpreter's last garbage
+    collection walks every object the run's imports made (Mitsuba, xarray, numba: ~1 s per
+    worker, which the cluster's close waits for); ``gc.freeze`` at exit leaves those out. The
+    worker's tasks and their files are closed by then, and its memory goes back with the process.
+    Nothing is imported here on a thread of its own meanwhile (see :mod:`bench_sim.runtime.preload`
+    for why): a worker imports what its tasks need as it runs them."""
+    _own_process_group()
+    atexit.register(gc.freeze)
+
+
 @contextlib.contextmanager
 def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
     """A ``LocalCluster`` of ``n_workers`` one-thread processes and its client, closed in order
@@ -217,7 +233,7 @@ def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
                         env={"BENCH_SIM_THREADS": "1", "OMP_NUM_THREADS": "1"},
                     )
                 client = Client(cluster)
-                client.run(_own_process_group)  # in every worker of the cluster
+                client.run(_prepare_worker)  # in every worker of the cluster
         except BaseException:
             if cluster is not None:
                 _close_quietly(client, cluster)
@@ -225,7 +241,43 @@ def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
     try:
         yield client
     finally:
-        _close_quietly(client, cluster)
+        closer = _CLOSERS.pop(id(client), None)
+        if closer is None:
+            _close_quietly(client, cluster)
+        else:  # started by close_in_background: wait for it
+            closer.join()
+
+
+#: background closes started by :func:`close_in_background`, by ``id`` of their client
+_CLOSERS: dict[int, threading.Thread] = {}
+
+
+def close_in_background(client: Any) -> None:
+    """Close the client of a :func:`quiet_local_cluster` now, then start closing its cluster on
+    a thread of its own: the caller's last writes run while the workers stop (a close waits for
+    the worker processes to exit). The ``with`` block's end waits for the close. Nothing for any
+    other client (a ``--scheduler`` cluster's is closed at the block's end).
+
+    The client is closed here, in the caller's thread, before its writes: while a client is
+    open it is Dask's default scheduler, and xarray then writes a file under a lock of the
+    cluster's (``dask.distributed.Lock``): a write racing the close fails, and leaves xarray's
+    own HDF5 lock held (the next netCDF write of the process waits for ever). The thread only
+    closes the cluster, and sets no process-wide state (a ``warnings.catch_warnings`` there
+    would race the caller's filters): the caller's ``open_client`` block keeps Dask's logs quiet
+    until the close is joined."""
+    cluster = getattr(client, "cluster", None)
+    if client is None or cluster is None or id(client) in _CLOSERS:
+        return
+    _close_quietly(client, None)
+    thread = threading.Thread(target=_close_cluster, args=(cluster,), name="bench_sim-close", daemon=True)
+    _CLOSERS[id(client)] = thread
+    thread.start()
+
+
+def _close_cluster(cluster: Any) -> None:
+    """Close a local cluster, ignoring its errors (on :func:`close_in_background`'s thread)."""
+    with contextlib.suppress(Exception):
+        cluster.close(timeout=10)
 
 
 @contextlib.contextmanager
@@ -250,11 +302,11 @@ def quiet_dask_logs() -> Iterator[None]:
 
 
 def _close_quietly(client: Any, cluster: Any) -> None:
-    """Close the client, then the cluster, with the shutdown's own log lines silenced."""
+    """Close the client, then the cluster (if any), with the shutdown's own log lines silenced."""
     with quiet_dask_logs(), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if client is not None:
             with contextlib.suppress(Exception):
                 client.close(timeout=10)
-        with contextlib.suppress(Exception):
-            cluster.close(timeout=10)
+        if cluster is not None:
+            _close_cluster(cluster)

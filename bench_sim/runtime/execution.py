@@ -40,6 +40,7 @@ import numpy as np
 
 from bench_sim.errors import BenchSimError, ClusterError
 from bench_sim.runtime.cluster import (
+    close_in_background,
     probe_scheduler,
     quiet_dask_logs,
     quiet_local_cluster,
@@ -54,6 +55,7 @@ __all__ = [
     "task_seed_sequence",
     "task_generator",
     "open_client",
+    "release_client",
     "run_tasks",
     "worker_cache",
     "default_workers",
@@ -237,6 +239,16 @@ def open_client(
         yield from _client(workers, scheduler, connect_timeout_s)
 
 
+def release_client(client: Any) -> None:
+    """Every task of the run is done: the client of a local cluster from :func:`open_client` is
+    closed now (Dask is no longer the default scheduler of what the caller writes next) and its
+    cluster starts closing on a thread of its own, so the caller writes its outputs while the
+    worker processes stop, off the critical path; the ``with open_client(...)`` block's end waits
+    for the close to finish (:func:`~bench_sim.runtime.cluster.close_in_background`). Nothing
+    for ``None`` (in-process runs) or a ``--scheduler`` cluster."""
+    close_in_background(client)
+
+
 def _client(workers: int | None, scheduler: str | None, connect_timeout_s: float | None) -> Iterator[Any]:
     """:func:`open_client`'s body for a cluster (a generator for ``yield from``)."""
     if scheduler is not None:
@@ -289,6 +301,7 @@ def run_tasks(
     on_result: Callable[[TaskOutcome], None] | None = None,
     keep_values: bool = True,
     shared: Sequence[Sequence[Shared]] | None = None,
+    meanwhile: Callable[[], None] | None = None,
 ) -> list[TaskOutcome]:
     """Run ``func(arg, *inputs)`` for every ``arg`` and report each outcome as it completes.
 
@@ -314,6 +327,11 @@ def run_tasks(
     shared
         Per task, the :class:`Shared` inputs it needs (passed to ``func`` after ``arg``, in
         this order); each distinct key is made once for the run. Default: none.
+    meanwhile
+        On a cluster, called in this process (this thread) once every task is submitted, before
+        the first outcome is awaited: work of this process that can overlap the tasks, such as
+        importing what the outputs are written with (:mod:`bench_sim.runtime.preload`). Not
+        called for in-process runs (``client`` ``None``).
 
     Returns
     -------
@@ -342,7 +360,7 @@ def run_tasks(
     if client is None:
         _run_here(func, idx, args, needs, record)
         return [outcomes[i] for i in idx]
-    _run_on(client, func, idx, args, needs, record, outcomes)
+    _run_on(client, func, idx, args, needs, record, outcomes, meanwhile)
     return [outcomes[i] for i in idx]
 
 
@@ -377,10 +395,10 @@ def _run_here(
 def _run_on(
     client: Any, func: Callable[..., Any], idx: list[int], args: Sequence[Any],
     needs: Sequence[tuple[Shared, ...]], record: Callable[[TaskOutcome], None],
-    outcomes: dict[int, TaskOutcome],
+    outcomes: dict[int, TaskOutcome], meanwhile: Callable[[], None] | None = None,
 ) -> None:
     """:func:`run_tasks` on a Dask client: the shared inputs first (at a higher priority), then
-    the tasks, each depending on the futures of its inputs."""
+    the tasks, each depending on the futures of its inputs; ``meanwhile()`` once all are submitted."""
     from distributed import as_completed
 
     uses = _uses(needs)
@@ -400,6 +418,8 @@ def _run_on(
     pending = as_completed(futures)
     del futures
     try:
+        if meanwhile is not None:
+            meanwhile()
         for fut in pending:  # only ``pending`` holds the futures not yet done
             try:
                 out = fut.result()  # a task's own exception is already an outcome (_run_one)

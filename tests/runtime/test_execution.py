@@ -9,6 +9,7 @@ from bench_sim.errors import BenchSimError
 from bench_sim.runtime.execution import (
     Shared,
     open_client,
+    release_client,
     run_tasks,
     task_generator,
     task_seed_sequence,
@@ -118,3 +119,42 @@ def test_shared_inputs_made_once_per_key_in_and_out_of_dask() -> None:
         there = run_tasks(_add, args, client=client, shared=_shared_for(args))
     assert [(o.value, o.error) for o in there] == [(o.value, o.error) for o in here]
     assert all(o.ok for o in there[:5])
+
+
+@pytest.mark.slow
+def test_a_released_cluster_closes_on_its_own_thread_and_is_closed_when_the_block_ends(tmp_path) -> None:
+    import dask.base
+    import xarray as xr
+
+    with open_client(workers=1) as client:
+        assert run_tasks(_draw, [(5, 0)], client=client)[0].ok
+        assert dask.base.get_scheduler() is not None  # the open client is Dask's default scheduler
+        cluster = client.cluster
+        release_client(client)
+        # the client is closed at once: what the caller writes next is Dask's and xarray's own
+        # business again (a netCDF write would otherwise take the closing cluster's lock)
+        assert client.status == "closed" and dask.base.get_scheduler() is None
+        xr.Dataset({"x": ("i", np.arange(3.0))}).to_netcdf(tmp_path / "written_while_closing.nc")
+        release_client(client)  # a second call changes nothing
+        release_client(None)  # nor one for in-process runs
+    assert cluster.status.name == "closed"
+    with xr.open_dataset(tmp_path / "written_while_closing.nc") as ds:
+        assert ds["x"].values.tolist() == [0.0, 1.0, 2.0]
+
+
+def test_meanwhile_runs_here_once_the_tasks_are_on_the_cluster_and_never_in_process() -> None:
+    import threading
+
+    calls: list[str] = []
+    seen: list[int] = []
+    run_tasks(_draw, [(5, 0)], client=None, meanwhile=lambda: calls.append("in-process"))
+    assert calls == []
+    with open_client(workers=1) as client:
+        def meanwhile() -> None:  # before any outcome is handed over, in the caller's thread
+            calls.append(threading.current_thread().name)
+            assert seen == []
+
+        out = run_tasks(_draw, [(5, 0), (5, 1)], client=client, on_result=lambda o: seen.append(o.index),
+                        meanwhile=meanwhile)
+    assert calls == [threading.current_thread().name]
+    assert [o.ok for o in out] == [True, True] and sorted(seen) == [0, 1]

@@ -54,7 +54,8 @@ from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dyna
 from bench_sim.pipeline import physical_coords, run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
-from bench_sim.runtime.execution import Shared, TaskOutcome, open_client, run_tasks
+from bench_sim.runtime.execution import Shared, TaskOutcome, open_client, release_client, run_tasks
+from bench_sim.runtime.preload import FIGURES, import_modules
 from bench_sim.runtime.progress import ProgressBar, progress_bar
 from bench_sim.sensor.model import stage_mean_var_dn
 from bench_sim.workflows.dataset.card import write_card
@@ -97,6 +98,8 @@ __all__ = [
     "manifest_frame",
 ]
 
+#: what the samples, the manifest and the card are written with (imported while samples run)
+WRITE_MODULES = ("xarray", "zarr", "pyarrow", *FIGURES)
 #: Seconds between manifest rewrites during a run
 MANIFEST_EVERY_S = 10.0
 
@@ -338,8 +341,8 @@ def _scene_values(values: dict[str, Any]) -> dict[str, float]:
 
 
 def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool) -> _SampleWriter:
-    """Make the samples to do, writing each as it completes; the manifest of what is on disk
-    is written if the run stops (Ctrl-C, a lost scheduler)."""
+    """Make the samples to do, writing each as it completes (:data:`WRITE_MODULES` imported meanwhile);
+    the manifest of what is on disk is written if the run stops (Ctrl-C, a lost scheduler)."""
     spec, todo = plan.spec, plan.todo
     camera_seed = spec.seed if spec.camera == "fixed" else None
     tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1], camera_seed,
@@ -350,7 +353,8 @@ def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool)
         writer = _SampleWriter(plan.out, spec, plan.values, meta, bar)
         try:
             run_tasks(make_sample, tasks, client=client, indices=todo, keep_values=False,
-                      on_result=writer.write, shared=sample_inputs(tasks))
+                      on_result=writer.write, shared=sample_inputs(tasks),
+                      meanwhile=lambda: import_modules(WRITE_MODULES))
         except BaseException:
             write_manifest(plan.out, spec, meta, plan.values)  # what is on disk now
             raise
@@ -406,8 +410,7 @@ def _plan_and_run(
     plan = _plan(spec_path, out, workers, scheduler, resume, only)
     spec, out = plan.spec, plan.out
     run = DatasetRun(out=out, samples=spec.samples)
-    # the execution layer first: a scheduler that cannot be reached (or a cluster that cannot
-    # start) is refused before anything is laid out at --out
+    # the execution layer first (refused before anything is laid out at --out if it cannot start)
     cluster = open_client(workers=workers, scheduler=scheduler) if plan.todo else contextlib.nullcontext()
     laid_out = False
     try:
@@ -423,8 +426,9 @@ def _plan_and_run(
                 writer = _run_samples(plan, client, meta, progress)
                 run.ran, run.failed = writer.ran, writer.failed
                 run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
-        df = write_manifest(out, spec, meta, plan.values)
-        write_card(out, spec, df, command=command, provenance=meta)
+            release_client(client)  # the cluster closes while the manifest and card are written
+            df = write_manifest(out, spec, meta, plan.values)
+            write_card(out, spec, df, command=command, provenance=meta)
         if run.complete == spec.samples:
             write_json(out / COMPLETION_RECORD, {
                 "command": "dataset", "version": meta["version"], "seed": spec.seed,

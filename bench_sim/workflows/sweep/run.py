@@ -52,7 +52,8 @@ from bench_sim.io import OUTPUT_MARKER, write_json
 from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries, listed_files, remove_listed
 from bench_sim.io.strict_json import strict_json
-from bench_sim.runtime.execution import TaskOutcome, check_workers, open_client, run_tasks
+from bench_sim.runtime.execution import TaskOutcome, check_workers, open_client, release_client, run_tasks
+from bench_sim.runtime.preload import FIGURES, import_modules
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.workflows.output_meta import provenance
 from bench_sim.workflows.preflight import preflight_tasks
@@ -86,6 +87,10 @@ __all__ = [
     "read_points",
     "spec_sha256",
 ]
+
+
+#: what the outputs are written with (``sweep.nc``: xarray, which asks for Dask's arrays, and netCDF4)
+WRITE_MODULES = ("xarray", "dask.array", "netCDF4")
 
 
 @dataclass
@@ -193,9 +198,10 @@ def _open_folder(
 
 def _run_points(
     plan: SweepPlan, client: Any, records: dict[int, dict[str, Any]], progress: bool,
-    on_point: Callable[[dict[str, Any]], None] | None,
+    on_point: Callable[[dict[str, Any]], None] | None, plots: bool,
 ) -> None:
-    """Run the points still to do; journal each record, rewrite ``points.csv`` as it arrives."""
+    """Run the points still to do; journal each record, rewrite ``points.csv`` as it arrives.
+    While the points run on workers, this process imports what the outputs are written with."""
     todo = plan.todo
     points = journal(plan.out)
     with progress_bar("sweep", len(todo), "points", enabled=progress) as bar:
@@ -212,7 +218,7 @@ def _run_points(
         shared, counting = point_inputs(todo)
         args = [replace(t, count_records=t.index in counting) for t in todo]
         run_tasks(measure_point, args, client=client, indices=[t.index for t in todo], on_result=done,
-                  shared=shared)
+                  shared=shared, meanwhile=lambda: import_modules(WRITE_MODULES + (FIGURES if plots else ())))
 
 
 def _totals(plan: SweepPlan, records: dict[int, dict[str, Any]]) -> dict[str, Any]:
@@ -247,11 +253,13 @@ def _run_and_write(
             sessions, records = _open_folder(plan, workers, scheduler)
             opened = True
             if todo:
-                _run_points(plan, client, records, progress, on_point)
-        totals = _totals(plan, records)
-        write_outputs(plan.out, plan, records, sessions, plots=plots)
-        write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
-                                                  "complete_with_failures", sessions, totals))
+                _run_points(plan, client, records, progress, on_point, plots)
+            release_client(client)  # the cluster closes while the outputs are written
+            totals = _totals(plan, records)
+            write_outputs(plan.out, plan, records, sessions, plots=plots)
+            write_json(plan.out / "sweep.json", _meta(plan, "complete" if totals["failed"] == 0 else
+                                                      "complete_with_failures", sessions, totals))
+        # the completion record once the cluster is closed: last, as before
         write_json(plan.out / OUTPUT_MARKER, {"command": "sweep", "spec_sha256": plan.sha256, **totals,
                                               "files": entries(plan.out)})
     except BaseException as exc:
