@@ -12,7 +12,9 @@ machine code is cached on disk (``cache=True``), so a later process loads it ins
 compiling it: in ``NUMBA_CACHE_DIR`` if set, else beside the module in ``__pycache__``, or where
 that is not writable in numba's user-wide cache folder (``~/.cache/numba``); where no folder is
 writable, every process compiles and nothing fails. :func:`warm_up` loads loops on a thread of
-its own while the caller goes on (a pass starts it before its set-up).
+its own while the caller goes on (a pass starts it before its set-up); numba parses there
+(``inspect.signature``), so ``ast.parse`` is made thread-safe first where CPython's is not
+(:func:`bench_sim.runtime.ast_guard.guard_ast_parse`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import threading
 import warnings
 from collections.abc import Callable, Iterable
 from typing import Any
+
+from bench_sim.runtime.ast_guard import guard_ast_parse
 
 __all__ = ["compiled", "warm_up", "Loop"]
 
@@ -67,6 +71,8 @@ def warm_up(loops: Iterable[Loop]) -> threading.Thread:
     def build() -> None:
         for fn, signature in loops:
             compiled(fn, signature)
+
+    guard_ast_parse()  # numba parses on the thread while the caller may (Mitsuba's variant)
 
     thread = threading.Thread(target=build, name="bench_sim-jit", daemon=True)
     thread.start()
