@@ -154,7 +154,8 @@ def _resolves(dotted: str) -> bool:
 FILE_SUFFIXES = {"py", "toml", "md", "json", "csv", "png", "zarr", "nc", "tiff", "tif", "exr", "npy", "npz",
                  "parquet", "txt", "xml", "sh", "tex"}
 #: libraries whose dotted names the docs quote (checked when installed)
-LIBRARIES = {"numpy", "pandas", "xarray", "torch", "dask", "os", "scipy", "zarr", "mitsuba", "drjit"}
+LIBRARIES = {"numpy", "pandas", "xarray", "torch", "dask", "os", "scipy", "zarr", "mitsuba", "drjit",
+             "ast", "inspect"}
 #: dotted names in the docs that are notation, not code or config (EMVA 1288's symbols)
 NOTATION = {"mu_e.sat", "mu_p.sat", "mu_y.dark", "sigma_y.dark"}  # EMVA 1288 symbols
 _SPAN = re.compile(r"`([^`\n]+)`")
