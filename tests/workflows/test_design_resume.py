@@ -85,12 +85,13 @@ def _workers(proc: subprocess.Popen[bytes]) -> list[psutil.Process]:
 
 def _busy_worker(proc: subprocess.Popen[bytes], out: Path) -> psutil.Process:
     """The worker of the design that uses the most CPU once both are there and the design has
-    laid out its folder (its tasks are on the workers then: the shared inputs, then the points).
-    A worker's points take well under a second at this size and a worker stops within ~0.2 s
-    of the run's end, so this is taken before the first point record, not after it."""
+    laid out its folder (``design.json``; its tasks go to the workers then: the shared inputs,
+    then the points). A point takes 0.04-0.15 s at this size and the three finish together, so
+    this is taken before the first point's files (``points/`` appears with them: waiting for
+    it, the test killed a worker of a finished run under load)."""
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and proc.poll() is None:
-        workers = _workers(proc) if (out / "points").is_dir() else []
+        workers = _workers(proc) if (out / "design.json").is_file() else []
         if len(workers) >= 2:
             usage = {}
             for p in workers:
