@@ -164,6 +164,12 @@ class RunTexture:
                     out[lo - r0 : hi - r0] = self._block(b)[lo - b * BLOCK_ROWS : hi - b * BLOCK_ROWS]
         return out
 
+    def drop_blocks(self) -> None:
+        """Forget the rasterised blocks held (shared with later passes over the same grid): read
+        again from the texture store, or rasterised, when next asked for (the same values)."""
+        with self._blocks.lock:
+            self._blocks.blocks.clear()
+
     @property
     def held_bytes(self) -> int:
         """Bytes of rasterised texels the texture holds now (its blocks, or the whole grid)."""
