@@ -57,7 +57,7 @@ from bench_sim.version import __version__
 __all__ = [
     "ENV_SWITCH", "ENV_SIZE", "DEFAULT_MIB", "FORMAT", "ARRAYS", "Stored", "store_dir", "store_on",
     "versions", "load", "save", "usage", "limit_bytes", "evict", "source_fingerprint", "package_version",
-    "page_out",
+    "page_out", "mapped_arrays",
 ]
 
 #: Environment variable that turns the store off (``off``, ``0``, ``false``, ``no``).
@@ -150,7 +150,7 @@ def _read(path: Path, key: str) -> Stored:
     not a complete set of ``key`` made with these :func:`versions`."""
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"][()]))
-    arrays = _mapped(path, ARRAYS)
+    arrays = mapped_arrays(path, ARRAYS)
     d_rec, static, position, hit = (arrays[name] for name in ARRAYS)
     if not isinstance(meta, dict) or meta.get("key") != key or meta.get("versions") != versions():
         raise ValueError("another key or versions")
@@ -167,7 +167,7 @@ def _read(path: Path, key: str) -> Stored:
     return tuple(lights), arrays
 
 
-def _mapped(path: Path, names: Sequence[str]) -> dict[str, np.ndarray]:
+def mapped_arrays(path: Path, names: Sequence[str]) -> dict[str, np.ndarray]:
     """The arrays ``names`` of the uncompressed ``.npz`` file ``path``, read-only views of one
     memory map of the file (its pages shared with the system's page cache, not copied:
     :func:`page_out` lets them go from the process's resident memory once read); ``ValueError``
@@ -200,7 +200,7 @@ def _mapped(path: Path, names: Sequence[str]) -> dict[str, np.ndarray]:
 
 
 def page_out(arrays: Sequence[np.ndarray]) -> None:
-    """Let the pages of memory-mapped ``arrays`` (views of :func:`_mapped`'s map) go from this
+    """Let the pages of memory-mapped ``arrays`` (views of :func:`mapped_arrays`'s map) go from this
     process's resident memory (``madvise(MADV_DONTNEED)``): the values stay, read again from the
     file (the page cache) when next used. Arrays in memory are left as they are."""
     for a in arrays:

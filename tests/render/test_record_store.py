@@ -301,3 +301,19 @@ def test_release_lets_go_of_a_pass_render_state(store, monkeypatch, on):
         assert np.array_equal(setup.grid.rows(0, 4), before)
     finally:
         records.clear_record_cache()
+
+
+def test_a_texture_block_round_trips_as_a_read_only_map(store):
+    """:mod:`bench_sim.render.texture_store`: a block stored is loaded as the same bytes, a
+    read-only map of its file (no copy); another shape is a miss (and the file is deleted)."""
+    import mmap
+
+    from bench_sim.render import texture_store
+
+    values = np.random.default_rng(3).random((7, 11), dtype=np.float32)
+    texture_store.save("block-a", values)
+    got = texture_store.load("block-a", values.shape)
+    assert got is not None and _same_bytes(got, values)
+    assert isinstance(got.base, mmap.mmap) and not got.flags.writeable
+    assert texture_store.load("block-a", (7, 12)) is None
+    assert texture_store.load("block-a", values.shape) is None
