@@ -43,8 +43,10 @@ for _sig in _EARLY:
 
 from bench_sim.cli import app  # noqa: E402 - imported with Ctrl-C and SIGTERM handled
 from bench_sim.io.interrupts import Terminated, leave_if_pending, leave_now, own_process_signals  # noqa: E402
+from bench_sim.runtime.allocator import one_arena  # noqa: E402
 
 own_process_signals()
+one_arena()  # before the command starts its threads (bench_sim.runtime.allocator)
 
 
 #: Longest wait for the libraries' exit functions before the process leaves regardless [s]

@@ -25,26 +25,24 @@ import numpy as np
 from bench_sim.config import BenchConfig
 from bench_sim.fusion.stage_pair import eq11_expected_dn, fuse_stage_words, true_hdr_dn
 from bench_sim.metrics.fusion_truth import clear_of_clips, clip_flags, relative_error, tdi_light_ratio
-from bench_sim.pipeline.variables import IMAGE_DIMS, pass_variables
+from bench_sim.pipeline.variables import IMAGE_DIMS, IMAGE_TRUTH_INPUTS, pass_variables
 
-__all__ = ["fused_images", "TRUTH_INPUTS"]
-
-#: the stage truth :func:`fused_images` needs for the image truth
-TRUTH_INPUTS = ("linear_dn", "mean_dn", "noise_std_dn", "photons")
+__all__ = ["fused_images"]
 
 
 def fused_images(
     cfg: BenchConfig, lines1: Mapping[str, np.ndarray], lines2: Mapping[str, np.ndarray]
 ) -> dict[str, np.ndarray]:
     """Image variable -> its lines (module docstring), from the same lines of both fused stages
-    (variable -> (n, N) lines: ``dn`` and, for the truth, :data:`TRUTH_INPUTS` of both), each
-    in its dtype of :data:`bench_sim.pipeline.PASS_VARIABLES`."""
+    (variable -> (n, N) lines: ``dn`` and, for the truth,
+    :data:`~bench_sim.pipeline.variables.IMAGE_TRUTH_INPUTS` of both), each in its dtype of
+    :data:`bench_sim.pipeline.PASS_VARIABLES`."""
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
     beta = cfg.dtdi.beta_bits
     fused = fuse_stage_words(cfg, lines1["dn"], lines2["dn"])
     dtypes = {v.name: v.array_dtype(beta) for v in pass_variables(IMAGE_DIMS, maps=True)}
     out: dict[str, np.ndarray] = {"gamma_hdr": fused.hdr, "gamma_hdr_source": fused.source}
-    if all(k in lines1 and k in lines2 for k in TRUTH_INPUTS):
+    if all(k in lines1 and k in lines2 for k in IMAGE_TRUTH_INPUTS):
         truth = true_hdr_dn(cfg, lines2["linear_dn"])
         clear = [clear_of_clips(s["linear_dn"], s["mean_dn"], s["noise_std_dn"]) for s in (lines1, lines2)]
         flags = clip_flags(*clear)

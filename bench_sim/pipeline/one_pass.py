@@ -15,7 +15,13 @@ from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.pipeline.fused_images import fused_images
 from bench_sim.pipeline.store_schema import COORD_ATTRS, pass_attrs, pass_coords
-from bench_sim.pipeline.variables import PASS_VARIABLES, pass_dtypes, pedestal_dn, variable_attrs
+from bench_sim.pipeline.variables import (
+    PASS_VARIABLES,
+    check_variables,
+    pass_dtypes,
+    pedestal_dn,
+    variable_attrs,
+)
 from bench_sim.render.exposures import RenderSetup, iter_radiance_frames, photons_of, prepare
 from bench_sim.render.frame_kernel import TAP_LOOP
 from bench_sim.runtime.jit import Loop, warm_up
@@ -84,6 +90,15 @@ class PassResult:
         if self.arrays is None or name not in self.arrays.index or stage not in self.arrays.index[name]:
             raise BenchSimError(f"PassResult: no {name} of stage {stage}")
         return self.arrays.arrays[name][self.arrays.index[name][stage]]
+
+    def drop(self, *names: str) -> None:
+        """Let go of the arrays of the stage variables ``names`` (a caller done with them, e.g.
+        with the truth once scored): :meth:`stage_array` no longer has them, and a ``dataset``
+        not built yet is built without them. ``dn`` (``stage_dn``) stays."""
+        if self.arrays is not None:
+            for name in set(names) - {"dn"}:
+                self.arrays.arrays.pop(name, None)
+                self.arrays.index.pop(name, None)
 
     @functools.cached_property
     def dataset(self) -> xr.Dataset:
@@ -195,6 +210,7 @@ def run_pass(
     fixed_pattern: FixedPattern | None = None,
     sink: Callable[[RenderSetup], PassSink] | None = None,
     truth_stages: Iterable[int] | None = None,
+    variables: Iterable[str] | None = None,
 ) -> PassResult:
     """Run one simulation pass: render, expose, accumulate stages and truth, fuse.
 
@@ -233,17 +249,22 @@ def run_pass(
         reading only their rows (the truth of a stage does not depend on the others). The
         ``dataset`` then holds these stages (``stage_dn`` has every stage's words); the maps of
         ``gamma_hdr`` need both fusion stages among them. Not with ``sink``.
+    variables
+        Keep only these of :data:`~bench_sim.pipeline.variables.PASS_VARIABLES` (``dn`` always;
+        default all): the truth computes only what they are made of, the image variables not
+        named are not made; the values kept are the same bytes. Not with ``sink``.
     """
     st = check_stages(stages, cfg.sensor.rows)
     sensor_chain(cfg.sensor)  # the chain's effects checked before anything is rendered
     some = st if truth_stages is None else check_stage_subset(truth_stages, st, "truth_stages")
     tst = some if truth else None
-    if sink is not None and tst not in (None, st):
-        raise BenchSimError("run_pass: truth_stages is not supported with a sink (it writes every stage)")
+    keep = None if variables is None else check_variables(tuple(variables))
+    if sink is not None and (tst not in (None, st) or keep is not None):
+        what = "truth_stages" if tst not in (None, st) else "variables"
+        raise BenchSimError(f"run_pass: {what} is not supported with a sink (it writes all of a pass)")
     rng = np.random.default_rng(seed)  # a Generator is used as is
     n_rows, n_cols = st[-1], cfg.sensor.columns
     timings = {"render_setup": 0.0, "render_frames": 0.0, "sensor_dtdi": 0.0, "truth": 0.0, "pass_wall": 0.0}
-
     t0 = time.perf_counter()
     warm_up(pass_loops(cfg, truth=tst is not None))  # loaded beside the set-up
     setup = prepare(cfg, frames_needed(cfg.lines, st), rng)
@@ -251,8 +272,8 @@ def run_pass(
     fixed = _fixed_pattern(cfg, rng, fixed_pattern)
     noise = seed_sequence(rng)
     fp = fixed if n_rows == cfg.sensor.rows else fixed.window(n_rows, n_cols)
-    lines_out, array_sink = _assembler(cfg, st, tst, truth, sink, setup)
-    stage_truth = None if tst is None else _pass_truth(cfg, setup, fp, tst, n_rows, timings)
+    lines_out, array_sink = _assembler(cfg, (st, tst), truth, sink, setup, keep)
+    stage_truth = None if tst is None else _pass_truth(cfg, setup, fp, tst, n_rows, timings, keep)
     _stream(cfg, setup, fp, noise, st, lines_out, stage_truth, timings, on_frames)
     if array_sink is None:
         return PassResult({}, setup, timings, None, truth=truth)
@@ -263,12 +284,13 @@ def run_pass(
 
 def _pass_truth(
     cfg: BenchConfig, setup: RenderSetup, fp: FixedPattern, tst: tuple[int, ...], n_rows: int,
-    timings: dict[str, float],
+    timings: dict[str, float], keep: tuple[str, ...] | None,
 ) -> PassTruth:
-    """The truth of stages ``tst`` of the pass (its set-up timed as the truth's)."""
+    """The truth of stages ``tst`` of the pass, its variables among ``keep`` (default all; its
+    set-up timed as the truth's)."""
     t0 = time.perf_counter()
     out = PassTruth(cfg, setup, fp, tst, pedestal_dn=pedestal_dn(cfg), band_lines=TRUTH_BAND_LINES,
-                    footprint_rows=n_rows)
+                    footprint_rows=n_rows, variables=keep)
     timings["truth"] += time.perf_counter() - t0
     return out
 
@@ -290,17 +312,24 @@ def _fixed_pattern(cfg: BenchConfig, rng: np.random.Generator, given: FixedPatte
 
 
 def _assembler(
-    cfg: BenchConfig, st: tuple[int, ...], tst: tuple[int, ...] | None, truth: bool,
-    sink: Callable[[RenderSetup], PassSink] | None, setup: RenderSetup,
+    cfg: BenchConfig, stage_sets: tuple[tuple[int, ...], tuple[int, ...] | None], truth: bool,
+    sink: Callable[[RenderSetup], PassSink] | None, setup: RenderSetup, keep: tuple[str, ...] | None,
 ) -> tuple[LineAssembler, ArraySink | None]:
-    """The pass's line assembler (truth of stages ``tst``) and, without ``sink``, its arrays."""
-    stage_dtypes, image_dtypes = pass_dtypes(cfg, st, truth=truth, truth_stages=tst)
+    """The pass's line assembler (stages ``st``, truth of stages ``tst``: ``stage_sets``; the
+    variables ``keep``, default all) and, without ``sink``, its arrays."""
+    st, tst = stage_sets
+    stage_dtypes, image_dtypes = pass_dtypes(cfg, st, truth=truth, truth_stages=tst, variables=keep)
     stages_of = {n: tst for n in stage_dtypes if n != "dn"} if tst is not None else None
     arrays = None if sink is not None else ArraySink(
         st, cfg.lines, cfg.sensor.columns, stage_dtypes, image_dtypes, stages_of
     )
     out = arrays if arrays is not None else sink(setup)  # type: ignore[misc]
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    fuse = (mu1, mu2, lambda g1, g2: fused_images(cfg, g1, g2)) if image_dtypes else None
+    fuse = (mu1, mu2, lambda g1, g2: _kept(fused_images(cfg, g1, g2), image_dtypes)) if image_dtypes else None
     top = float(full_scale_dn(cfg.dtdi.beta_bits) - 1)
     return LineAssembler(st, stage_dtypes, out, top, fuse, stages_of), arrays
+
+
+def _kept(images: dict[str, np.ndarray], names: Iterable[str]) -> dict[str, np.ndarray]:
+    """The image variables of ``images`` among ``names``."""
+    return {n: images[n] for n in names}

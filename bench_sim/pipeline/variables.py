@@ -10,18 +10,21 @@ stored dtypes (:mod:`bench_sim.workflows.dataset.reader`) and the resource estim
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from bench_sim.config import BETA_BITS_MAX, BenchConfig
+from bench_sim.errors import BenchSimError
 from bench_sim.sensor.effects.chain import sensor_chain
 from bench_sim.sensor.model import word_dtype
 
 __all__ = [
     "Variable", "PASS_VARIABLES", "VARIABLES_BY_NAME", "STAGE_DIMS", "IMAGE_DIMS", "WORD", "pass_variables",
-    "stage_pixel_bytes", "pass_dtypes", "variable_attrs", "pedestal_dn",
+    "stage_pixel_bytes", "pass_dtypes", "check_variables", "IMAGE_TRUTH_INPUTS", "variable_attrs",
+    "pedestal_dn",
 ]
 
 # --- the pass's variables ------------------------------------------------------------------------
@@ -32,6 +35,9 @@ IMAGE_DIMS = ("line", "column")
 #: dtype of the stage word: :func:`bench_sim.sensor.model.word_dtype` of ``dtdi.beta_bits`` in a
 #: pass, the widest word (``beta = 32``) where stored for any ``beta`` (a data set)
 WORD = "word"
+#: the stage truth (of both fusion stages) the image variables of the truth are made of
+#: (:func:`bench_sim.pipeline.fused_images.fused_images`)
+IMAGE_TRUTH_INPUTS = ("linear_dn", "mean_dn", "noise_std_dn", "photons")
 
 
 @dataclass(frozen=True)
@@ -148,17 +154,37 @@ def stage_pixel_bytes(beta_bits: int | None, *, truth: bool, stored: bool = Fals
 
 
 def pass_dtypes(
-    cfg: BenchConfig, st: tuple[int, ...], *, truth: bool, truth_stages: tuple[int, ...] | None = None
+    cfg: BenchConfig, st: tuple[int, ...], *, truth: bool, truth_stages: tuple[int, ...] | None = None,
+    variables: Collection[str] | None = None,
 ) -> tuple[dict[str, np.dtype], dict[str, np.dtype]]:
     """The dtypes of a pass's stage variables and of its image variables (``gamma_hdr`` and
     ``gamma_hdr_source`` when both fusion stages are in ``st``; the maps of the truth when
-    both have it: in ``truth_stages``, default ``st``), from :data:`PASS_VARIABLES`."""
+    both have it: in ``truth_stages``, default ``st``), from :data:`PASS_VARIABLES`; of those
+    named in ``variables`` only (:func:`check_variables`; default: all)."""
     beta = cfg.dtdi.beta_bits
     stage = {v.name: v.array_dtype(beta) for v in pass_variables(STAGE_DIMS, truth=truth)}
     both = {cfg.fusion.mu1, cfg.fusion.mu2}
     maps = truth and both <= set(st if truth_stages is None else truth_stages)
     image = {v.name: v.array_dtype(beta) for v in pass_variables(IMAGE_DIMS, truth=maps, maps=True)}
-    return stage, (image if both <= set(st) else {})
+    image = image if both <= set(st) else {}
+    if variables is None:
+        return stage, image
+    keep = set(check_variables(variables))
+    return ({n: dt for n, dt in stage.items() if n in keep}, {n: dt for n, dt in image.items() if n in keep})
+
+
+def check_variables(variables: Collection[str]) -> tuple[str, ...]:
+    """``variables`` (names of :data:`PASS_VARIABLES` a pass keeps) in table order, ``dn``
+    always among them; :class:`BenchSimError` (one line) for an unknown name, or for a map of
+    the truth without the stage truth it is made of (:data:`IMAGE_TRUTH_INPUTS`)."""
+    names = set(variables) | {"dn"}
+    if unknown := sorted(names - set(VARIABLES_BY_NAME)):
+        raise BenchSimError(f"variables: unknown {unknown}; allowed {[v.name for v in PASS_VARIABLES]}")
+    maps = sorted(n for n in names if VARIABLES_BY_NAME[n].truth and VARIABLES_BY_NAME[n].dims == IMAGE_DIMS)
+    if maps and (missing := [n for n in IMAGE_TRUTH_INPUTS if n not in names]):
+        raise BenchSimError(f"variables: {maps} are made of the stage truth {list(IMAGE_TRUTH_INPUTS)}; "
+                            f"add {missing}")
+    return tuple(v.name for v in PASS_VARIABLES if v.name in names)
 
 
 def variable_attrs(cfg: BenchConfig, name: str) -> dict[str, Any]:

@@ -185,6 +185,7 @@ class FastEngine:
             if name in emitting
         ]
         self.kernels = self._cached_kernels()
+        self.records.page_out()  # the kernels made: the records' large arrays not read again
         self._combined: dict[tuple[float, ...], tuple[list[np.ndarray], np.ndarray]] = {}
         # texel rows beyond a smeared row that its box filter reads
         self._smear_rows = int(np.ceil(geom.smear_m / grid.h_y_m)) + 1

@@ -22,11 +22,13 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.render import record_store
 from bench_sim.render.engines import FastEngine, ReferenceEngine, check_fast_engine_valid
 from bench_sim.render.radiometry import radiance_to_photons_factor
 from bench_sim.render.records import (
     LightRecords,
     cached_records,
+    forget_records,
     light_records,
     mitsuba_render_count,
     records_key,
@@ -38,7 +40,7 @@ from bench_sim.runtime.backend import BackendChoice, init_mitsuba, select_backen
 
 __all__ = [
     "RenderSetup", "prepare", "iter_photon_frames", "iter_radiance_frames", "photons_of", "render_photons",
-    "fast_records", "records_group",
+    "fast_records", "records_group", "release",
 ]
 
 
@@ -78,6 +80,20 @@ def _backend(cfg: BenchConfig, engine: str) -> tuple[Any, BackendChoice, LightRe
             return None, choice, records
     mi, choice = _mitsuba(cfg)
     return mi, choice, None
+
+
+def release(setup: RenderSetup) -> None:
+    """Let go of what ``setup`` holds to render frames, once its pass is done: its engine (the
+    fast engine's row kernels, their light-weighted sums and its records) and, while the disk
+    stores are on (:func:`bench_sim.render.record_store.store_on`: a later pass reads them back
+    in a fraction of a second), the scene's records and the grid's rasterised blocks in this
+    process's caches. The set-up renders no more frames; its geometry, grid (the panel), info
+    and backend stay."""
+    engine, setup.engine = setup.engine, None
+    if record_store.store_on():
+        if isinstance(engine, FastEngine):
+            forget_records(engine.records.key)
+        setup.grid.drop_blocks()
 
 
 def records_group(cfg: BenchConfig, engine: str | None = None) -> str | None:

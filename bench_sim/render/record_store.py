@@ -38,8 +38,11 @@ import contextlib
 import functools
 import hashlib
 import json
+import math
+import mmap
 import os
 import re
+import zipfile
 from collections.abc import Mapping, Sequence
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -54,6 +57,7 @@ from bench_sim.version import __version__
 __all__ = [
     "ENV_SWITCH", "ENV_SIZE", "DEFAULT_MIB", "FORMAT", "ARRAYS", "Stored", "store_dir", "store_on",
     "versions", "load", "save", "usage", "limit_bytes", "evict", "source_fingerprint", "package_version",
+    "page_out", "mapped_arrays",
 ]
 
 #: Environment variable that turns the store off (``off``, ``0``, ``false``, ``no``).
@@ -146,7 +150,7 @@ def _read(path: Path, key: str) -> Stored:
     not a complete set of ``key`` made with these :func:`versions`."""
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"][()]))
-        arrays = {name: z[name] for name in ARRAYS}
+    arrays = mapped_arrays(path, ARRAYS)
     d_rec, static, position, hit = (arrays[name] for name in ARRAYS)
     if not isinstance(meta, dict) or meta.get("key") != key or meta.get("versions") != versions():
         raise ValueError("another key or versions")
@@ -161,6 +165,51 @@ def _read(path: Path, key: str) -> Stored:
     if not consistent:
         raise ValueError("inconsistent arrays")
     return tuple(lights), arrays
+
+
+def mapped_arrays(path: Path, names: Sequence[str]) -> dict[str, np.ndarray]:
+    """The arrays ``names`` of the uncompressed ``.npz`` file ``path``, read-only views of one
+    memory map of the file (its pages shared with the system's page cache, not copied:
+    :func:`page_out` lets them go from the process's resident memory once read); ``ValueError``
+    for a member that is compressed, missing or not a plain array."""
+    with zipfile.ZipFile(path) as zf, open(path, "rb") as f:
+        where = {}
+        for name in names:
+            info = zf.getinfo(f"{name}.npy")
+            if info.compress_type != zipfile.ZIP_STORED:
+                raise ValueError(f"{name}: compressed")
+            f.seek(info.header_offset)
+            local = f.read(30)  # the member's local header: its name and extra field follow
+            if local[:4] != b"PK\x03\x04":
+                raise ValueError(f"{name}: no local header")
+            f.seek(info.header_offset + 30 + int.from_bytes(local[26:28], "little")
+                   + int.from_bytes(local[28:30], "little"))
+            fmt = np.lib.format
+            header = fmt.read_array_header_1_0 if fmt.read_magic(f)[0] == 1 else fmt.read_array_header_2_0
+            shape, fortran, dtype = header(f)
+            if dtype.hasobject:
+                raise ValueError(f"{name}: not a plain array")
+            where[name] = (shape, fortran, dtype, f.tell())
+        mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+    out = {}
+    for name, (shape, fortran, dtype, offset) in where.items():
+        if offset + math.prod(shape) * dtype.itemsize > len(mm):
+            raise ValueError(f"{name}: beyond the end of the file")
+        out[name] = np.ndarray(shape, dtype, buffer=mm, offset=offset, order="F" if fortran else "C")
+    return out
+
+
+def page_out(arrays: Sequence[np.ndarray]) -> None:
+    """Let the pages of memory-mapped ``arrays`` (views of :func:`mapped_arrays`'s map) go from this
+    process's resident memory (``madvise(MADV_DONTNEED)``): the values stay, read again from the
+    file (the page cache) when next used. Arrays in memory are left as they are."""
+    for a in arrays:
+        base = a.base
+        while isinstance(base, np.ndarray):
+            base = base.base
+        if isinstance(base, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED"):
+            with contextlib.suppress(OSError, ValueError):
+                base.madvise(mmap.MADV_DONTNEED)
 
 
 def load(key: str) -> Stored | None:

@@ -196,6 +196,13 @@ class LightRecords:
     renders: int
     derived: dict[Any, Any] = field(default_factory=dict)
 
+    def page_out(self) -> None:
+        """Let the pages of the arrays that only the kernels read (``d_rec``, ``position``,
+        ``hit``) leave this process's resident memory when they are mapped from the disk store
+        (:func:`bench_sim.render.record_store.page_out`): once the kernels are made; a later set of
+        kernels reads them again from the file, the same values."""
+        record_store.page_out([self.d_rec, self.position, self.hit])
+
     def shareable(self) -> LightRecords:
         """These records without their derived quantities: the arrays (not copied) to hand to
         another process, apart from this process's cached object (whose ``derived`` changes)."""
@@ -317,6 +324,13 @@ def install_records(rec: LightRecords) -> bool:
             return False
         _store(rec.shareable())
     return True
+
+
+def forget_records(key: str) -> None:
+    """Drop the records of ``key`` (and the kernels derived from them) from this process's cache:
+    the next pass of the scene reads them from the disk store, or renders them again."""
+    with _lock:
+        _cache.pop(key, None)
 
 
 def clear_record_cache() -> None:

@@ -51,9 +51,13 @@ from bench_sim.runtime.parallel import parallel_map, thread_count
 __all__ = ["RunTexture", "run_texture", "drum_texture", "smear_filter", "ground_truth_reflectance"]
 
 _MARGIN_PX = 6.0
-#: Texel rows per rasterised block, and blocks a texture keeps (least recently used dropped)
+#: Texel rows per rasterised block, and the most blocks a texture keeps (least recently used
+#: dropped; a texture keeps fewer when its pass reads fewer at once: :func:`blocks_read_at_once`)
 BLOCK_ROWS = 256
 CACHE_BLOCKS = 12
+#: Frames of the fast engine's longest window, and lines of the truth's longest band (at least
+#: ``bench_sim.pipeline.RENDER_CHUNK_FRAMES`` and ``TRUTH_BAND_LINES``; tested)
+PASS_WINDOW_FRAMES = 64
 #: Grids of a target that is not drawn whose blocks the process keeps between passes
 SHARED_GRIDS = 1
 
@@ -95,6 +99,8 @@ class RunTexture:
     #: what makes the grid's blocks, as text (:mod:`bench_sim.render.texture_store`); ``None``: not
     #: stored (a target read from a file or drawn as a whole map)
     store_key: str | None = None
+    #: blocks kept (:func:`blocks_read_at_once`, at most :data:`CACHE_BLOCKS`)
+    cache_blocks: int = CACHE_BLOCKS
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -144,7 +150,7 @@ class RunTexture:
         if got is None:
             got = self._stored_block(b)
             blocks[b] = got
-            while len(blocks) > CACHE_BLOCKS:
+            while len(blocks) > self.cache_blocks:
                 blocks.popitem(last=False)
         else:
             blocks.move_to_end(b)
@@ -163,6 +169,12 @@ class RunTexture:
                 if hi > lo:
                     out[lo - r0 : hi - r0] = self._block(b)[lo - b * BLOCK_ROWS : hi - b * BLOCK_ROWS]
         return out
+
+    def drop_blocks(self) -> None:
+        """Forget the rasterised blocks held (shared with later passes over the same grid): read
+        again from the texture store, or rasterised, when next asked for (the same values)."""
+        with self._blocks.lock:
+            self._blocks.blocks.clear()
 
     @property
     def held_bytes(self) -> int:
@@ -198,6 +210,15 @@ def _blocks_for(cfg: BenchConfig, circumference_px: float, grid: tuple[float | i
     return blocks
 
 
+def blocks_read_at_once(rows: int, q: int) -> int:
+    """The blocks a pass of a sensor of ``rows`` rows over a grid of ``q`` texel rows per line
+    reads at once, at most :data:`CACHE_BLOCKS`: the fast engine's window (the rows' footprints
+    over :data:`PASS_WINDOW_FRAMES` frames) and, beside it, the truth's band of as many lines over
+    the same rows, each over one more block than it spans."""
+    span = -(-(int(rows) + PASS_WINDOW_FRAMES) * int(q) // BLOCK_ROWS)
+    return min(CACHE_BLOCKS, 2 * (span + 1))
+
+
 def run_texture(
     cfg: BenchConfig, geom: RigGeometry, first_frame: int, frames: int, rng: np.random.Generator | None = None
 ) -> RunTexture:
@@ -231,6 +252,7 @@ def run_texture(
     return RunTexture(
         a0 * h_y, h_y, x_start, h_x, q, panel, ny, nx, v0_px=v0_px, hu_px=hu_px, hv_px=hv_px, lens=lens,
         _blocks=blocks, store_key=_store_key(cfg, panel, float(circumference_px), grid_key, lens),
+        cache_blocks=blocks_read_at_once(cfg.sensor.rows, q),
     )
 
 

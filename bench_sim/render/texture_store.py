@@ -18,7 +18,8 @@ Files
     RunTexture.store_key`) and :func:`versions` (bench_sim, numpy and scipy versions,
     :data:`FORMAT` and a fingerprint of the sources that make the blocks). A file holds the block
     ``values`` (float32, as made: the same bytes) and ``meta`` (the key and the versions as JSON),
-    checked on load with the block's shape.
+    checked on load with the block's shape. A block loaded is a read-only memory map of its file
+    (:func:`bench_sim.render.record_store.mapped_arrays`: no copy, no checksum of the zip member).
 Failures
     Never fails a run: a file that cannot be read is a miss (and is deleted), a write that fails
     is skipped; files are written under a temporary name and renamed into place.
@@ -85,7 +86,7 @@ def load(key: str, shape: tuple[int, int]) -> np.ndarray | None:
     try:
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"][()]))
-            values = z["values"]
+        values = record_store.mapped_arrays(path, ("values",))["values"]  # a map of the file, no copy
         same = meta == {"key": key, "versions": versions()}
         if not same or values.dtype != np.float32 or values.shape != shape:
             raise ValueError("another block")

@@ -138,27 +138,36 @@ def ordered_imap(
 
 
 def prefetch(items: Iterable[T], depth: int = 1, threads: int | None = None) -> Iterator[T]:
-    """Iterate ``items`` in a background thread, up to ``depth`` items ahead of the consumer (a
-    producer that itself uses the pool, e.g. rendering, overlaps with the consumer's work). With
-    one thread, ``items`` is iterated in the caller's thread. Errors reach the consumer."""
+    """Iterate ``items`` in a background thread, up to ``depth`` items ahead of the one the
+    consumer holds (a producer that itself uses the pool, e.g. rendering, overlaps with the
+    consumer's work): at most ``depth + 1`` items exist at once, the consumer's included, so a
+    consumer that drops each item before it asks for the next holds ``depth + 1`` (not
+    ``depth + 2``, as a bounded queue with the producer blocked on it would). With one thread,
+    ``items`` is iterated in the caller's thread. Errors reach the consumer."""
     n = thread_count() if threads is None else int(threads)
     if n <= 1:
         yield from items
         return
-    q: queue.Queue[tuple[str, object]] = queue.Queue(maxsize=max(1, int(depth)))
+    q: queue.Queue[tuple[str, object]] = queue.Queue()
+    #: items the producer may make before the consumer takes one
+    slots = threading.Semaphore(max(1, int(depth)))
     stop = threading.Event()
+    end = object()
 
     def produce() -> None:
         try:
-            for x in items:
-                while not stop.is_set():
-                    try:
-                        q.put(("item", x), timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
+            it = iter(items)
+            while True:
+                while not slots.acquire(timeout=0.1):
+                    if stop.is_set():
+                        return
                 if stop.is_set():
                     return
+                x = next(it, end)
+                if x is end:
+                    break
+                q.put(("item", x))
+                del x  # not held while the next slot is awaited
             q.put(("end", None))
         except BaseException as exc:  # handed to the consumer
             q.put(("error", exc))
@@ -172,14 +181,11 @@ def prefetch(items: Iterable[T], depth: int = 1, threads: int | None = None) -> 
                 return
             if kind == "error":
                 raise value  # type: ignore[misc]
+            slots.release()  # taken: the producer may make the next one meanwhile
             yield value  # type: ignore[misc]
+            del value  # not held while the next is awaited
     finally:
         stop.set()
-        while worker.is_alive():
-            try:
-                q.get(timeout=0.1)
-            except queue.Empty:
-                pass
         worker.join()
 
 

@@ -73,6 +73,30 @@ def test_round_trip_is_byte_identical(store):
         assert _same_bytes(arrays[name], getattr(rec, name)), name
 
 
+def test_a_stored_set_is_mapped_read_only_and_paged_out_unchanged(store):
+    """The arrays of a stored set are read-only views of a memory map of its file, not copies;
+    :func:`record_store.page_out` (the engine's, once its kernels are made) lets their pages go
+    and they read the same bytes after it, also after the file is deleted (the map holds it)."""
+    import mmap
+
+    rec = _records()
+    record_store.save(*_args(rec))
+    got = record_store.load(rec.key)
+    assert got is not None
+    arrays = got[1]
+    for name, a in arrays.items():
+        assert isinstance(a.base, mmap.mmap) and not a.flags.writeable, name
+        with pytest.raises(ValueError):
+            a.flat[0] = 0
+    for path in _files(store):
+        path.unlink()
+    record_store.page_out(list(arrays.values()))
+    for name in record_store.ARRAYS:
+        assert _same_bytes(arrays[name], getattr(rec, name)), name
+    record_store.page_out([rec.d_rec])  # arrays in memory: left as they are
+    assert _same_bytes(rec.d_rec, _records().d_rec)
+
+
 def test_a_set_from_disk_joins_the_process_cache_with_no_renders(store):
     """``cached_records`` finds a stored set (no Mitsuba needed), as one of 0 renders, and keeps
     it in the process's cache; ``light_records`` returns it as not rendered."""
@@ -252,3 +276,44 @@ def test_a_new_process_reads_the_records_from_disk_without_rendering(store):
         assert fast_records(cfg).renders == 0 and records.mitsuba_render_count() == n0
     finally:
         records.clear_record_cache()
+
+
+@pytest.mark.parametrize("on", [True, False])
+def test_release_lets_go_of_a_pass_render_state(store, monkeypatch, on):
+    """``release`` (``reproduce`` after its pass): the set-up's engine goes; with the stores on,
+    the scene's records leave the process's cache and the grid's blocks are dropped (a later
+    pass reads them from disk, the same values); with them off both stay (they would have to be
+    rendered again)."""
+    from bench_sim.render.exposures import prepare, release
+
+    monkeypatch.setenv(record_store.ENV_SWITCH, "on" if on else "off")
+    records.clear_record_cache()
+    try:
+        cfg = tiny_cfg()
+        setup = prepare(cfg, 8, np.random.default_rng(0))
+        key = setup.engine.records.key
+        before = setup.grid.rows(0, 4)
+        assert setup.grid.held_bytes > 0 and key in records._cache
+        release(setup)
+        assert setup.engine is None
+        assert (key in records._cache) is not on
+        assert (setup.grid.held_bytes == 0) is on
+        assert np.array_equal(setup.grid.rows(0, 4), before)
+    finally:
+        records.clear_record_cache()
+
+
+def test_a_texture_block_round_trips_as_a_read_only_map(store):
+    """:mod:`bench_sim.render.texture_store`: a block stored is loaded as the same bytes, a
+    read-only map of its file (no copy); another shape is a miss (and the file is deleted)."""
+    import mmap
+
+    from bench_sim.render import texture_store
+
+    values = np.random.default_rng(3).random((7, 11), dtype=np.float32)
+    texture_store.save("block-a", values)
+    got = texture_store.load("block-a", values.shape)
+    assert got is not None and _same_bytes(got, values)
+    assert isinstance(got.base, mmap.mmap) and not got.flags.writeable
+    assert texture_store.load("block-a", (7, 12)) is None
+    assert texture_store.load("block-a", values.shape) is None

@@ -191,3 +191,37 @@ def test_a_target_that_is_not_drawn_shares_its_rasterised_blocks_between_passes(
     c = texture.run_texture(leaves, geom, FIRST, 8, np.random.default_rng(0))
     d = texture.run_texture(leaves, geom, FIRST, 8, np.random.default_rng(0))
     assert c._blocks is not d._blocks
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fewer", [False, True])
+def test_a_pass_keeps_the_blocks_it_reads_at_once(monkeypatch, fewer):
+    """A texture keeps the blocks its pass reads at once (the engine's window and the truth's
+    band, each over the sensor's rows and :data:`~bench_sim.render.texture.PASS_WINDOW_FRAMES`
+    frames or lines, which the pass's own chunk and band do not exceed), at most
+    :data:`~bench_sim.render.texture.CACHE_BLOCKS`: a pass of the paper rig over 20 blocks makes
+    none twice (with the stores off, a block made twice is rasterised and blurred twice); with
+    half as many kept, some are."""
+    from bench_sim.config import SCENES_DIR, load_config, with_overrides
+    from bench_sim.pipeline import RENDER_CHUNK_FRAMES, TRUTH_BAND_LINES, run_pass
+    from bench_sim.render import texture
+
+    assert max(RENDER_CHUNK_FRAMES, TRUTH_BAND_LINES) <= texture.PASS_WINDOW_FRAMES
+    assert texture.blocks_read_at_once(100, 4) == 8  # the paper rig: 4 blocks of window, 4 of band
+    assert texture.blocks_read_at_once(1000, 8) == texture.CACHE_BLOCKS
+    if fewer:
+        keep = texture.blocks_read_at_once
+        monkeypatch.setattr(texture, "blocks_read_at_once", lambda rows, q: keep(rows, q) // 2)
+    made: list[int] = []
+    make = texture.RunTexture._made_block
+
+    def counted(self, b):
+        made.append(b)
+        return make(self, b)
+
+    monkeypatch.setattr(texture.RunTexture, "_made_block", counted)
+    cfg = with_overrides(load_config(SCENES_DIR / "paper_rig.toml"),
+                         {"sensor": {"columns": 32}, "target": {"panel_columns": 32}})
+    run_pass(cfg, [10, 80], 0, truth=True)
+    assert len(set(made)) >= 18
+    assert (len(made) == len(set(made))) is not fewer

@@ -87,3 +87,54 @@ def test_an_error_in_the_block_drops_the_steps_not_started_and_waits_for_the_run
         assert started.wait(5)
         raise RuntimeError("caller")
     assert finished == ["slow"]  # the running step ended before the block was left
+
+
+def test_prefetch_holds_the_consumers_item_and_one_ahead_at_most() -> None:
+    """``prefetch(depth=1)`` makes an item only once the consumer has taken the one before: with
+    a consumer that drops each item before asking for the next, at most two exist at once (a
+    bounded queue with the producer blocked on it held three); the items arrive in order, all
+    of them, and the producer still works while the consumer does."""
+    import gc
+    import weakref
+
+    from bench_sim.runtime.parallel import prefetch
+
+    alive: list[weakref.ref[object]] = []
+    most = [0]
+    lock = threading.Lock()
+
+    class Item:
+        def __init__(self, k: int) -> None:
+            self.k = k
+
+    def items():
+        for k in range(12):
+            with lock:
+                gc.collect()
+                most[0] = max(most[0], sum(r() is not None for r in alive) + 1)
+            item = Item(k)
+            alive.append(weakref.ref(item))
+            yield item
+            del item
+
+    got = []
+    for item in prefetch(items(), depth=1, threads=2):
+        got.append(item.k)
+        time.sleep(0.01)  # the producer runs ahead meanwhile
+        del item
+    assert got == list(range(12))
+    assert most[0] <= 2
+
+
+def test_prefetch_hands_the_producers_error_to_the_consumer() -> None:
+    from bench_sim.runtime.parallel import prefetch
+
+    def items():
+        yield 1
+        raise RuntimeError("render failed")
+
+    out = []
+    with pytest.raises(RuntimeError, match="render failed"):
+        for x in prefetch(items(), threads=2):
+            out.append(x)
+    assert out == [1]

@@ -237,6 +237,52 @@ def test_truth_of_some_stages_is_the_truth_of_those_stages():
         assert np.array_equal(part.dataset[name].values, full.dataset[name].values, equal_nan=True), name
 
 
+@pytest.mark.parametrize("keep", [
+    ("dn", "photons", "linear_dn", "reflectance", "clipped"),  # reproduce's: no read cumulants
+    ("dn", "mean_dn"),  # the companion pass's core: the cumulants, no other truth
+    ("dn", "noise_std_dn", "gamma_hdr", "gamma_hdr_source"),
+])
+def test_variables_kept_are_the_same_bytes(keep):
+    """``variables``: a pass that keeps some of its variables (the truth computing only the
+    quantities they are made of) gives them the same bytes as the pass that keeps all of them,
+    stage 1 (whose mean folds the word's clip into its one read) and a clipping spot included,
+    and holds no other."""
+    from bench_sim.pipeline import run_pass
+
+    spot = {"strong": {"irradiance_w_m2": 900.0}}
+    cfg = config_from_dict(_overrides(timing={"sync_error": 0.02}, lights=spot))
+    stages = [1, 2, 5, 8, 12]
+    full = run_pass(cfg, stages, 5, truth=True)
+    part = run_pass(cfg, stages, 5, truth=True, variables=keep)
+    assert part.arrays is not None and set(part.arrays.arrays) == set(keep)
+    assert full.dataset["clipped"].values.any()
+    for name in keep:
+        assert np.array_equal(part.dataset[name].values, full.dataset[name].values, equal_nan=True), name
+
+
+@pytest.mark.parametrize("keep, problem", [
+    (("dn", "photon"), "unknown"), (("dn", "true_hdr_dn", "linear_dn"), "made of the stage truth"),
+])
+def test_variables_refused(keep, problem):
+    from bench_sim.pipeline import run_pass
+
+    with pytest.raises(BenchSimError, match=problem) as exc:
+        run_pass(config_from_dict(_overrides()), [2, 8], 1, variables=keep)
+    assert "\n" not in str(exc.value)
+
+
+def test_a_pass_drops_what_its_caller_is_done_with():
+    """``PassResult.drop``: the arrays let go (not in ``stage_array`` nor the dataset); the words stay."""
+    from bench_sim.pipeline import run_pass
+
+    sim = run_pass(config_from_dict(_overrides()), [2, 8], 1, truth=True)
+    words = sim.stage_dn[8].copy()
+    sim.drop("photons", "dn")
+    with pytest.raises(BenchSimError, match="no photons"):
+        sim.stage_array("photons", 8)
+    assert "photons" not in sim.dataset and np.array_equal(sim.dataset["dn"].sel(stage=8).values, words)
+
+
 @pytest.mark.parametrize("some, problem", [((2, 7), "one of the pass's stages"), ((2, 2), "given twice")])
 def test_truth_stages_outside_the_pass_refused(some, problem):
     from bench_sim.pipeline import run_pass

@@ -179,7 +179,7 @@ def fig4_hdr(
     for k, (img, box, colour, title) in enumerate(insets):
         ax = fig.add_axes(rects[2 + k])
         l0, l1, c0, c1 = box
-        crop = img[l0:l1, c0:c1]
+        crop = img[l0:l1, c0:c1].copy()  # not a view: the figure keeps the crop, not the image
         lo, hi = float(np.percentile(crop, 0.5)), float(np.percentile(crop, 99.5))
         ax.imshow(crop, cmap="gray", vmin=lo, vmax=max(hi, lo + 1e-6), interpolation="nearest")
         ax.set_title(title, fontsize=8, color=colour)

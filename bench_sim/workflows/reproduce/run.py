@@ -48,8 +48,10 @@ from bench_sim.measure.pass_metrics import PassMetrics, pass_metrics, patch_slic
 from bench_sim.measure.uniform_field import measurement_pedestal_dn
 from bench_sim.metrics.dynamic_range import dr_increase_eq15_db, stage_pairs_for_db
 from bench_sim.pipeline import PassResult, run_pass
+from bench_sim.render.exposures import release
 from bench_sim.rig.geometry import rig_geometry
 from bench_sim.rig.target import make_panel
+from bench_sim.runtime.allocator import give_back, large_blocks_mapped
 from bench_sim.runtime.parallel import Lane
 from bench_sim.runtime.progress import progress_bar
 from bench_sim.runtime.provenance import render_provenance
@@ -92,6 +94,10 @@ FIG3_STAGES: tuple[int, ...] = tuple(range(5, 101, 5))
 CHAIN_DR_COLUMNS = 64
 #: ``--quick``: lit levels of the whole-chain DR measurement's series (the default otherwise).
 QUICK_DR_LEVELS = 24
+#: The pass's variables the reproduction reads (its metrics, fusion scores and figures): every
+#: stage's words and, of ``mu1`` and ``mu2``, the truth without ``mean_dn`` and ``noise_std_dn``
+#: (and their read cumulants, not computed); no image variable (it fuses the words itself).
+PASS_VARIABLES_READ = ("dn", "photons", "linear_dn", "reflectance", "clipped")
 #: Bits of the stage images' TIFF files.
 TIFF_BITS = 16
 #: The steps of ``metrics.json``'s ``timings_s``, in this order (``metrics`` and ``sharpness``
@@ -228,7 +234,8 @@ def _pass_with_progress(
 
         # the truth where the metrics read it: the fusion's two stages (Fig. 3's others need none)
         fusion = (cfg.fusion.mu1, cfg.fusion.mu2)
-        return run_pass(cfg, stages, rng, truth=True, truth_stages=fusion, on_frames=advance)
+        return run_pass(cfg, stages, rng, truth=True, truth_stages=fusion, on_frames=advance,
+                        variables=PASS_VARIABLES_READ)
 
 
 @dataclass
@@ -267,7 +274,7 @@ def _pass_and_beside(
 
     def stage_mtf() -> Any:
         with timer.timed("sharpness"):
-            return measure_stage_mtf(cfg, seed)
+            return measure_stage_mtf(cfg, seed, release_render=True)
 
     def on_first() -> None:
         queued["state"] = rng.bit_generator.state
@@ -349,6 +356,10 @@ def run_reproduce(
         sim, beside = _pass_and_beside(cfg, stages, rng, seed, quick, lane, timer)
         for step in ("render_setup", "render_frames", "sensor_dtdi", "pass_wall"):
             timer.add(step, sim.timings_s[step])
+        # what the pass held to render (its engine, records, texture blocks) and the free memory
+        # its working set left in the allocator: given back before the outputs' working sets
+        release(sim.setup)
+        give_back()
         # 3. fusion and display transform
         with timer.timed("fusion"):
             fused, tra8 = _fuse(cfg, sim)
@@ -359,7 +370,8 @@ def run_reproduce(
                   "config_sha256": meta["config_sha256"]}
         with output_set(out, record) as tmp:  # the files as one set: all of them or none
             try:
-                result = _outputs(tmp, cfg, (stages, fig3), sim, fused, tra8, beside, lane, meta, timer)
+                with large_blocks_mapped():  # the outputs' temporaries leave no holes behind
+                    result = _outputs(tmp, cfg, (stages, fig3), sim, fused, tra8, beside, lane, meta, timer)
             except BaseException:
                 lane.cancel()  # no step of the lane goes on writing into the folder removed now
                 raise
@@ -394,8 +406,10 @@ def _outputs(
     with timer.timed("metrics"):
         pm = pass_metrics(cfg, sim, fused)
         scores = fusion_scores(cfg, sim, fused)  # Gamma_HDR against its exact truth, eq. 11 and clip-aware
+    sim.drop(*PASS_VARIABLES_READ)  # the truth, read: not held while the figures are drawn
     writing.fig4(tmp / "fig4_hdr.png", cfg, _inset_boxes(sim.setup.grid.panel, cfg, cfg.lines), meta,
                  sim.stage_dn, fused, tra8, sim.setup.grid.panel, sim.setup.geom)
+    give_back()  # the metrics' and Fig. 4's free memory, before the largest figures' working sets
     writing.drawn(lambda: write_truth_figures(scores, tmp, meta))
     result = _result(cfg, stages, fig3, sim, beside.chain(), pm, meta)
     result = replace(result, truth=TruthResult(scores.summary))

@@ -43,6 +43,7 @@ from bench_sim.io import write_csv, write_figure_png
 from bench_sim.measure.sharpness import SFR_FREQUENCY_CYC_PX, PassSharpness, pass_sharpness
 from bench_sim.metrics.sfr_readings import mtf50
 from bench_sim.pipeline import run_pass
+from bench_sim.render.exposures import release
 from bench_sim.rig.lens_psf import lens_mtf_across, lens_otf
 from bench_sim.workflows.preflight import nyquist_warning
 from bench_sim.workflows.reproduce.result import SharpnessResult
@@ -65,6 +66,9 @@ NOISE_FREE = "noise-free: expected words (mean_dn) of a pass without fixed-patte
 COMPANION_TEXELS_PER_PIXEL = 8
 #: the companion's edges' mean angle to the pixel axes [deg]
 COMPANION_EDGE_ANGLE_DEG = 5.0
+#: the companion pass's variables its e-SFRs read (:func:`bench_sim.measure.sharpness.pass_sharpness`
+#: on :func:`noise_free` images: the words' expectations, the light, the clips, the fusion's source)
+COMPANION_VARIABLES = ("dn", "mean_dn", "photons", "reflectance", "clipped", "gamma_hdr", "gamma_hdr_source")
 
 
 def companion_config(cfg: BenchConfig) -> BenchConfig:
@@ -130,15 +134,21 @@ class StageMTF:
         return None if hdr is None else _num(hdr[direction].mtf50_cyc_px)
 
 
-def measure_stage_mtf(cfg: BenchConfig, seed: int, stages: Sequence[int] | None = None) -> StageMTF:
+def measure_stage_mtf(
+    cfg: BenchConfig, seed: int, stages: Sequence[int] | None = None, *, release_render: bool = False
+) -> StageMTF:
     """The companion pass (module docstring), noise-free (:func:`noise_free`, on the pass's arrays:
     no dataset is built), with its e-SFR per stage and of ``Gamma_HDR``; at ``stages`` and ``mu1``,
-    ``mu2`` if given (``bench-sim design``: every candidate stage), else at :data:`MTF_STAGES`."""
+    ``mu2`` if given (``bench-sim design``: every candidate stage), else at :data:`MTF_STAGES`.
+    ``release_render``: the pass's render state let go as soon as it is done
+    (:func:`bench_sim.render.exposures.release`; a run that makes no other companion pass)."""
     comp = companion_config(cfg)
     chosen = MTF_STAGES if stages is None else tuple(stages)
     stages = sorted({m for m in chosen if m <= cfg.sensor.rows} | {cfg.fusion.mu1, cfg.fusion.mu2})
     rng = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(2)[1])
-    sim = run_pass(comp, stages, rng, truth=True)
+    sim = run_pass(comp, stages, rng, truth=True, variables=COMPANION_VARIABLES)
+    if release_render:
+        release(sim.setup)
     assert sim.arrays is not None
     has = set(sim.arrays.arrays)
     mu1, mu2 = comp.fusion.mu1, comp.fusion.mu2
