@@ -9,9 +9,11 @@ fused stages), not of the lights or the target: it is measured once per distinct
 whole sweep (:func:`point_inputs`: a shared input of the execution layer,
 :class:`bench_sim.runtime.execution.Shared`, made by :func:`camera_dr` on the sweep's root
 stream ``SeedSequence(seed)``; the points draw from its children), so every point with the same
-camera reports the same numbers, whichever worker ran it. The fast engine's light records are
-shared the same way: rendered once per distinct scene (:func:`bench_sim.render.exposures.fast_records`)
-and installed in the process of each point that needs them.
+camera reports the same numbers, whichever worker ran it; its columns are kept on disk
+(:mod:`bench_sim.workflows.sweep.camera_store`) for a later sweep of the same camera. The fast
+engine's light records are shared the same way: rendered once per distinct scene
+(:func:`bench_sim.render.exposures.fast_records`) and installed in the process of each point
+that needs them.
 """
 
 from __future__ import annotations
