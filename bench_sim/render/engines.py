@@ -26,6 +26,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,6 +34,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
+from bench_sim.render import kernel_store
 from bench_sim.render.frame_kernel import apply_taps
 from bench_sim.render.records import (
     REFERENCE_IRRADIANCE_W_M2,
@@ -197,11 +199,30 @@ class FastEngine:
         derived = self.records.derived
         kern = derived.pop(key, None)
         if kern is None:
-            kern = self._kernels()
+            kern = self._stored_kernels(key)
         derived[key] = kern  # the most recent last; the oldest dropped beyond KERNEL_ENTRIES
         kept = [k for k in list(derived) if isinstance(k, tuple) and k[:1] == ("kernels",)]
         for old in kept[:-KERNEL_ENTRIES]:
             derived.pop(old, None)
+        return kern
+
+    def kernel_key(self, grid_key: tuple[Any, ...]) -> str:
+        """The kernels' key in the disk store (:mod:`bench_sim.render.kernel_store`): the records'
+        key, the grid's (``grid_key``: floats by their exact repr) and the sensor's rows, columns
+        and sub-pixels."""
+        cfg = self.cfg
+        return json.dumps([self.records.key, repr(grid_key), cfg.sensor.rows, cfg.sensor.columns,
+                           cfg.render.subpixels])
+
+    def _stored_kernels(self, grid_key: tuple[Any, ...]) -> list[_RowKernel]:
+        """The kernels from the disk store, else derived (:meth:`_kernels`) and stored: the same
+        arrays either way."""
+        key = self.kernel_key(grid_key)
+        stored = kernel_store.load(key)
+        if stored is not None:
+            return [_RowKernel(by, bx, w) for by, bx, w in stored]
+        kern = self._kernels()
+        kernel_store.save(key, [(k.base_y, k.base_x, k.weights) for k in kern])
         return kern
 
     def _kernels(self) -> list[_RowKernel]:

@@ -9,9 +9,11 @@ fused stages), not of the lights or the target: it is measured once per distinct
 whole sweep (:func:`point_inputs`: a shared input of the execution layer,
 :class:`bench_sim.runtime.execution.Shared`, made by :func:`camera_dr` on the sweep's root
 stream ``SeedSequence(seed)``; the points draw from its children), so every point with the same
-camera reports the same numbers, whichever worker ran it. The fast engine's light records are
-shared the same way: rendered once per distinct scene (:func:`bench_sim.render.exposures.fast_records`)
-and installed in the process of each point that needs them.
+camera reports the same numbers, whichever worker ran it; its columns are kept on disk
+(:mod:`bench_sim.workflows.sweep.camera_store`) for a later sweep of the same camera. The fast
+engine's light records are shared the same way: rendered once per distinct scene
+(:func:`bench_sim.render.exposures.fast_records`) and installed in the process of each point
+that needs them.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 
 from bench_sim.config import BenchConfig
 from bench_sim.fusion.stage_pair import fuse_stage_words
+from bench_sim.io.strict_json import strict_json
 from bench_sim.measure.chain_dr import measure_chain_dynamic_range
 from bench_sim.measure.fusion_scores import fusion_scores
 from bench_sim.measure.pass_metrics import pass_metrics
@@ -33,15 +36,16 @@ from bench_sim.pipeline import run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
 from bench_sim.runtime.execution import Shared, task_seed_sequence, worker_cache
+from bench_sim.workflows.sweep import camera_store
 from bench_sim.workflows.sweep.bands import banding_rows, stage_banding
 from bench_sim.workflows.sweep.light_keys import light_ratio
 from bench_sim.workflows.sweep.plan import IMAGES, TRUTH_REGIONS, TRUTH_RULES, PointTask, banding_column
 from bench_sim.workflows.sweep.point_images import write_point_images
 
-__all__ = ["measure_point", "point_inputs", "camera_dr"]
+__all__ = ["measure_point", "point_inputs", "camera_dr", "camera_key"]
 
 
-def _camera_key(cfg: BenchConfig, root_seed: int, dr_levels: int) -> str:
+def camera_key(cfg: BenchConfig, root_seed: int, dr_levels: int) -> str:
     """What the measured DR depends on: sensor, timing, DTDI, the fused stages, the stream."""
     part = {
         "sensor": cfg.sensor.model_dump(mode="json"),
@@ -54,19 +58,29 @@ def _camera_key(cfg: BenchConfig, root_seed: int, dr_levels: int) -> str:
     return "sweep-chain-dr:" + json.dumps(part, sort_keys=True)
 
 
-def camera_dr(arg: tuple[BenchConfig, int, int]) -> Any:
-    """The measured dynamic range through the chain of the camera of ``(cfg, root_seed,
-    dr_levels)`` (:func:`~bench_sim.measure.chain_dr.measure_chain_dynamic_range` on
-    ``SeedSequence(root_seed)``): a shared input of the points of that camera."""
+def camera_dr(arg: tuple[BenchConfig, int, int]) -> dict[str, Any]:
+    """The camera columns of the camera of ``(cfg, root_seed, dr_levels)``: its measured dynamic
+    range through the chain (:func:`~bench_sim.measure.chain_dr.measure_chain_dynamic_range` on
+    ``SeedSequence(root_seed)``), as strict JSON holds them (the point's record does); a shared
+    input of the points of that camera. Read from the disk store
+    (:mod:`bench_sim.workflows.sweep.camera_store`) when this camera was measured before, else
+    measured and stored: the same values either way."""
     cfg, root_seed, dr_levels = arg
-    return measure_chain_dynamic_range(
+    key = camera_key(cfg, root_seed, dr_levels)
+    stored = camera_store.load(key)
+    if stored is not None:
+        return stored
+    dr = measure_chain_dynamic_range(
         cfg, np.random.SeedSequence(root_seed), n_levels=dr_levels, columns=min(64, cfg.sensor.columns)
     )
+    columns: dict[str, Any] = strict_json(_camera_columns(dr))
+    camera_store.save(key, columns)
+    return columns
 
 
-def _camera_dr(cfg: BenchConfig, root_seed: int, dr_levels: int) -> Any:
+def _camera_dr(cfg: BenchConfig, root_seed: int, dr_levels: int) -> dict[str, Any]:
     """:func:`camera_dr`, cached in this process (a point run without its shared input)."""
-    key = _camera_key(cfg, root_seed, dr_levels)
+    key = camera_key(cfg, root_seed, dr_levels)
     return worker_cache(key, lambda: camera_dr((cfg, root_seed, dr_levels)))
 
 
@@ -79,7 +93,7 @@ def point_inputs(tasks: list[PointTask]) -> tuple[list[tuple[Shared, ...]], set[
     for t in tasks:
         group = records_group(t.cfg)
         camera = (t.cfg, t.root_seed, t.dr_levels)
-        dr = Shared(_camera_key(*camera), camera_dr, camera)
+        dr = Shared(camera_key(*camera), camera_dr, camera)
         if group is None:
             shared.append((dr,))
             continue
@@ -191,13 +205,13 @@ def measure_point(task: PointTask, *inputs: Any) -> dict[str, Any]:
     records = next((x for x in inputs if isinstance(x, LightRecords)), None)
     if records is not None:
         install_records(records)
-    dr = next((x for x in inputs if not isinstance(x, LightRecords)), None)
+    dr = next((x for x in inputs if isinstance(x, dict)), None)  # the camera columns
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
     rng = np.random.default_rng(task_seed_sequence(task.root_seed, task.stream))
     sim = run_pass(cfg, task.stages, rng, truth=True)
     fused = fuse_stage_words(cfg, sim.stage_dn[mu1], sim.stage_dn[mu2])
     pm = pass_metrics(cfg, sim, fused)
-    rec = _camera_columns(dr if dr is not None else _camera_dr(cfg, task.root_seed, task.dr_levels))
+    rec = dict(dr if dr is not None else _camera_dr(cfg, task.root_seed, task.dr_levels))
     rec.update(_scene_columns(pm))
     shared_renders = records.renders if records is not None and task.count_records else 0
     rec["mitsuba_renders"] = _renders(sim.setup) + shared_renders

@@ -23,7 +23,10 @@ workers (:func:`~bench_sim.workflows.sweep.point.point_inputs`, shared inputs of
 layer): the fast engine's light records once per distinct scene (a light's power or flicker,
 the target, the sensor's noise, DTDI or fusion change no record) and the camera's measured
 dynamic range once per distinct camera, each as a task of its own that runs beside the others
-and is handed to the points that need it. Worker processes live for the whole sweep, so the
+and is handed to the points that need it; the records, the engine's kernels and the camera's
+columns are kept on disk too (:mod:`bench_sim.render.record_store`,
+:mod:`bench_sim.render.kernel_store`, :mod:`bench_sim.workflows.sweep.camera_store`), so a
+later sweep of the same scene and camera reads them. Worker processes live for the whole sweep, so the
 render module's caches (Mitsuba, compiled kernels) serve every point they run. Each point
 reports the Mitsuba renders made for it (``mitsuba_renders``: its pass's, plus its shared
 records' for the first point, by index, that uses them) and ``sweep.json`` their total.

@@ -1,0 +1,131 @@
+"""The fast engine's row kernels on disk, beside its light records
+(:mod:`bench_sim.render.record_store`): a new process (a Dask worker, a second run) that finds
+the kernels of its records and run texture grid loads them instead of deriving them again from
+the records (~0.5 s of one core per process at ``--quick`` size).
+
+Where
+    ``<cache folder>/kernels/`` (the record store's cache folder). Removing it clears it.
+Switch and size
+    The record store's: ``BENCH_SIM_RECORD_CACHE=off`` turns this store off too (the test suite
+    runs with it off); at most ``BENCH_SIM_RECORD_CACHE_MIB`` MiB in this folder, least
+    recently used files deleted beyond it.
+Files
+    ``<sha256>.npz`` (uncompressed, no pickles), the hash of the kernels' key (the records' key
+    and the grid's: :meth:`bench_sim.render.engines.FastEngine.kernel_key`) and
+    :func:`versions` (the record store's, NumPy's version and a fingerprint of the engine's
+    source). Members: ``meta`` (the key, the versions and the number of rows as JSON),
+    ``bases`` (rows, 2) int64 (each row's first texel row and column) and ``w<i>``, row ``i``'s
+    float32 weights as they were derived (same dtype, shape, bytes).
+Failures
+    The store never fails a run: a file that cannot be read (truncated, corrupt, another key or
+    versions, inconsistent members) is a miss and is deleted if possible; a write that fails is
+    skipped. Writes are atomic (:func:`bench_sim.io.atomic.atomic_path`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import hashlib
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench_sim.io.atomic import atomic_path
+from bench_sim.render import record_store
+from bench_sim.runtime.backend import cache_folder
+
+__all__ = ["FORMAT", "RowKernels", "store_dir", "versions", "load", "save"]
+
+#: Version of the file layout; raise it when the files or the kernels' meaning change.
+FORMAT = 1
+#: Kernels of a sensor's rows: ``(base_y, base_x, weights)`` per row.
+RowKernels = list[tuple[int, int, np.ndarray]]
+
+
+def store_dir() -> Path | None:
+    """The store's folder (``<cache folder>/kernels``), or ``None`` when the stores are off."""
+    return cache_folder() / "kernels" if record_store.store_on() else None
+
+
+@functools.cache
+def versions() -> dict[str, str]:
+    """What stored kernels depend on besides their key: the record store's
+    :func:`~bench_sim.render.record_store.versions`, NumPy's version, :data:`FORMAT` and the
+    fingerprint of the engine that derives them. Computed once per process."""
+    return {
+        **record_store.versions(),
+        "numpy": np.__version__,
+        "kernels_format": str(FORMAT),
+        "engine": record_store.source_fingerprint(("render/engines.py",)),
+    }
+
+
+def _path(folder: Path, key: str) -> Path:
+    ident = json.dumps([key, versions()], sort_keys=True)
+    return folder / (hashlib.sha256(ident.encode()).hexdigest() + ".npz")
+
+
+def _read(path: Path, key: str) -> RowKernels:
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"][()]))
+        if meta.get("key") != key or meta.get("versions") != versions():
+            raise ValueError("another key or versions")
+        bases = z["bases"]
+        rows = int(meta["rows"])
+        if bases.shape != (rows, 2) or bases.dtype != np.int64:
+            raise ValueError("inconsistent bases")
+        out: RowKernels = []
+        for i in range(rows):
+            w = z[f"w{i}"]
+            if w.dtype != np.float32 or w.ndim != 4:
+                raise ValueError("inconsistent weights")
+            out.append((int(bases[i, 0]), int(bases[i, 1]), w))
+    return out
+
+
+def load(key: str) -> RowKernels | None:
+    """The stored kernels of ``key``, or ``None``: the store is off, has none, or the file
+    cannot be read (then it is deleted). Never raises."""
+    folder = store_dir()
+    if folder is None:
+        return None
+    try:
+        path = _path(folder, key)
+        if not path.is_file():
+            return None
+    except Exception:
+        return None
+    try:
+        kernels = _read(path, key)
+    except Exception:
+        with contextlib.suppress(OSError):
+            path.unlink()
+        return None
+    with contextlib.suppress(OSError):
+        os.utime(path)  # recently used: evicted last
+    return kernels
+
+
+def save(key: str, kernels: Sequence[tuple[int, int, np.ndarray]]) -> None:
+    """Store the kernels of ``key``, then delete the least recently used files beyond the size
+    bound. Nothing when the store is off; a write that fails is skipped (never raises)."""
+    folder = store_dir()
+    if folder is None:
+        return
+    try:
+        path = _path(folder, key)
+        meta = json.dumps({"key": key, "versions": versions(), "rows": len(kernels)})
+        bases = np.array([[by, bx] for by, bx, _ in kernels], dtype=np.int64).reshape(len(kernels), 2)
+        members: dict[str, Any] = {"meta": np.array(meta), "bases": bases}
+        members.update({f"w{i}": w for i, (_, _, w) in enumerate(kernels)})
+        folder.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            np.savez(f, **members)
+    except Exception:  # read-only or full disk: the kernels are only not kept
+        return
+    record_store.evict(folder, record_store.limit_bytes())
