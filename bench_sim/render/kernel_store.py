@@ -24,18 +24,14 @@ Failures
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import hashlib
 import json
-import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bench_sim.io.atomic import atomic_path
 from bench_sim.render import record_store
 from bench_sim.runtime.backend import cache_folder
 
@@ -65,11 +61,6 @@ def versions() -> dict[str, str]:
     }
 
 
-def _path(folder: Path, key: str) -> Path:
-    ident = json.dumps([key, versions()], sort_keys=True)
-    return folder / (hashlib.sha256(ident.encode()).hexdigest() + ".npz")
-
-
 def _read(path: Path, key: str) -> RowKernels:
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"][()]))
@@ -91,41 +82,16 @@ def _read(path: Path, key: str) -> RowKernels:
 def load(key: str) -> RowKernels | None:
     """The stored kernels of ``key``, or ``None``: the store is off, has none, or the file
     cannot be read (then it is deleted). Never raises."""
-    folder = store_dir()
-    if folder is None:
-        return None
-    try:
-        path = _path(folder, key)
-        if not path.is_file():
-            return None
-    except Exception:
-        return None
-    try:
-        kernels = _read(path, key)
-    except Exception:
-        with contextlib.suppress(OSError):
-            path.unlink()
-        return None
-    with contextlib.suppress(OSError):
-        os.utime(path)  # recently used: evicted last
-    return kernels
+    return record_store.read_entry(store_dir(), key, versions(), lambda path: _read(path, key))
 
 
 def save(key: str, kernels: Sequence[tuple[int, int, np.ndarray]]) -> None:
     """Store the kernels of ``key``, then delete the least recently used files beyond the size
     bound. Nothing when the store is off; a write that fails is skipped (never raises)."""
-    folder = store_dir()
-    if folder is None:
-        return
-    try:
-        path = _path(folder, key)
+
+    def members() -> dict[str, Any]:
         meta = json.dumps({"key": key, "versions": versions(), "rows": len(kernels)})
         bases = np.array([[by, bx] for by, bx, _ in kernels], dtype=np.int64).reshape(len(kernels), 2)
-        members: dict[str, Any] = {"meta": np.array(meta), "bases": bases}
-        members.update({f"w{i}": w for i, (_, _, w) in enumerate(kernels)})
-        folder.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.savez(f, **members)
-    except Exception:  # read-only or full disk: the kernels are only not kept
-        return
-    record_store.evict(folder, record_store.limit_bytes())
+        return {"meta": np.array(meta), "bases": bases, **{f"w{i}": w for i, (_, _, w) in enumerate(kernels)}}
+
+    record_store.write_entry(store_dir(), key, versions(), members)

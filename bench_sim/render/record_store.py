@@ -43,10 +43,10 @@ import mmap
 import os
 import re
 import zipfile
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -57,7 +57,7 @@ from bench_sim.version import __version__
 __all__ = [
     "ENV_SWITCH", "ENV_SIZE", "DEFAULT_MIB", "FORMAT", "ARRAYS", "Stored", "store_dir", "store_on",
     "versions", "load", "save", "usage", "limit_bytes", "evict", "source_fingerprint", "package_version",
-    "page_out", "mapped_arrays",
+    "page_out", "mapped_arrays", "entry_path", "read_entry", "write_entry",
 ]
 
 #: Environment variable that turns the store off (``off``, ``0``, ``false``, ``no``).
@@ -135,9 +135,57 @@ def versions() -> dict[str, str]:
     }
 
 
-def _path(folder: Path, key: str) -> Path:
-    ident = json.dumps([key, versions()], sort_keys=True)
+T = TypeVar("T")
+
+
+def entry_path(folder: Path, key: str, made_with: Mapping[str, str]) -> Path:
+    """The file of ``key`` in a store's ``folder``: ``<sha256>.npz`` of the key and the
+    versions it was ``made_with`` (this store's and the kernel, texture and camera stores')."""
+    ident = json.dumps([key, dict(made_with)], sort_keys=True)
     return folder / (hashlib.sha256(ident.encode()).hexdigest() + ".npz")
+
+
+def read_entry(folder: Path | None, key: str, made_with: Mapping[str, str],
+               read: Callable[[Path], T]) -> T | None:
+    """``read(path)`` of the stored file of ``key``, or ``None``: the store is off (``folder``
+    ``None``), has no such file, or ``read`` raises (the file is not a complete entry of ``key``
+    made with these versions; it is then deleted). A file read is marked recently used (evicted
+    last). Never raises."""
+    if folder is None:
+        return None
+    try:
+        path = entry_path(folder, key, made_with)
+        if not path.is_file():
+            return None
+    except Exception:
+        return None
+    try:
+        value = read(path)
+    except Exception:
+        _remove(path)
+        return None
+    with contextlib.suppress(OSError):
+        os.utime(path)  # recently used: evicted last
+    return value
+
+
+def write_entry(folder: Path | None, key: str, made_with: Mapping[str, str],
+                members: Callable[[], Mapping[str, Any]]) -> None:
+    """Write ``members()`` (name -> array, ``np.savez``'s members) as the file of ``key``,
+    atomically, then delete the least recently used files of ``folder`` beyond the size bound
+    (:func:`limit_bytes`). Nothing when the store is off; a write that fails (read-only or full
+    disk) is skipped: the entry is only not kept. Never raises."""
+    if folder is None:
+        return
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        path = entry_path(folder, key, made_with)
+        named = dict(members())
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            np.savez(f, **named)
+    except Exception:
+        return
+    evict(folder, limit_bytes())
 
 
 def _remove(path: Path) -> None:
@@ -215,41 +263,19 @@ def page_out(arrays: Sequence[np.ndarray]) -> None:
 def load(key: str) -> Stored | None:
     """The stored record set of ``key`` (its light names and arrays), or ``None``: the store is
     off, has no such set, or its file cannot be read (then the file is deleted). Never raises."""
-    folder = store_dir()
-    if folder is None:
-        return None
-    try:
-        path = _path(folder, key)
-    except Exception:
-        return None
-    if not path.is_file():
-        return None
-    try:
-        rec = _read(path, key)
-    except Exception:
-        _remove(path)
-        return None
-    with contextlib.suppress(OSError):
-        os.utime(path)  # recently used: evicted last
-    return rec
+    return read_entry(store_dir(), key, versions(), lambda path: _read(path, key))
 
 
 def save(key: str, lights: Sequence[str], arrays: Mapping[str, np.ndarray]) -> None:
     """Store the record set of ``key`` (its light names and its :data:`ARRAYS`), then delete the
     least recently used files beyond the size bound. Does nothing when the store is off; a write
     that fails is skipped (never raises)."""
-    folder = store_dir()
-    if folder is None:
-        return
-    try:
-        path = _path(folder, key)
+
+    def members() -> dict[str, Any]:
         meta = json.dumps({"key": key, "lights": list(lights), "versions": versions()})
-        with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            named: dict[str, Any] = {name: arrays[name] for name in ARRAYS}
-            np.savez(f, meta=np.array(meta), **named)
-    except Exception:  # read-only or full disk: the records are only not kept
-        return
-    evict(folder, limit_bytes())
+        return {"meta": np.array(meta), **{name: arrays[name] for name in ARRAYS}}
+
+    write_entry(store_dir(), key, versions(), members)
 
 
 def _stored(folder: Path) -> list[tuple[int, int, Path]]:

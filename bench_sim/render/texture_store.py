@@ -27,16 +27,12 @@ Failures
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import hashlib
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
-from bench_sim.io.atomic import atomic_path
 from bench_sim.render import record_store
 from bench_sim.runtime.backend import cache_folder
 from bench_sim.version import __version__
@@ -66,51 +62,24 @@ def versions() -> dict[str, str]:
     }
 
 
-def _path(folder: Path, key: str) -> Path:
-    ident = json.dumps([key, versions()], sort_keys=True)
-    return folder / (hashlib.sha256(ident.encode()).hexdigest() + ".npz")
+def _read(path: Path, key: str, shape: tuple[int, int]) -> np.ndarray:
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"][()]))
+    values = record_store.mapped_arrays(path, ("values",))["values"]  # a map of the file, no copy
+    same = meta == {"key": key, "versions": versions()}
+    if not same or values.dtype != np.float32 or values.shape != shape:
+        raise ValueError("another block")
+    return values
 
 
 def load(key: str, shape: tuple[int, int]) -> np.ndarray | None:
     """The stored block of ``key`` (float32 of ``shape``), or ``None``: the store is off, has no
     such block, or its file cannot be read (then it is deleted). Never raises."""
-    folder = store_dir()
-    if folder is None:
-        return None
-    try:
-        path = _path(folder, key)
-        if not path.is_file():
-            return None
-    except Exception:
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"][()]))
-        values = record_store.mapped_arrays(path, ("values",))["values"]  # a map of the file, no copy
-        same = meta == {"key": key, "versions": versions()}
-        if not same or values.dtype != np.float32 or values.shape != shape:
-            raise ValueError("another block")
-    except Exception:
-        with contextlib.suppress(OSError):
-            path.unlink()
-        return None
-    with contextlib.suppress(OSError):
-        os.utime(path)  # recently used: evicted last
-    return values
+    return record_store.read_entry(store_dir(), key, versions(), lambda path: _read(path, key, shape))
 
 
 def save(key: str, values: np.ndarray) -> None:
     """Store the block ``values`` of ``key``, then delete the least recently used files beyond the
     size bound. Does nothing when the store is off; a write that fails is skipped."""
-    folder = store_dir()
-    if folder is None:
-        return
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        path = _path(folder, key)
-        meta = json.dumps({"key": key, "versions": versions()})
-        with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.savez(f, meta=np.array(meta), values=values)
-    except Exception:  # read-only or full disk: the block is only not kept
-        return
-    record_store.evict(folder, record_store.limit_bytes())
+    meta = json.dumps({"key": key, "versions": versions()})
+    record_store.write_entry(store_dir(), key, versions(), lambda: {"meta": np.array(meta), "values": values})

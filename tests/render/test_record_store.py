@@ -125,7 +125,7 @@ def test_another_key_is_a_miss(store):
     assert record_store.load("scene-b") is None
     # a file of another key under this key's name (never written so): a miss, and removed
     [path] = _files(store)
-    wrong = record_store._path(store, "scene-b")
+    wrong = record_store.entry_path(store, "scene-b", record_store.versions())
     path.rename(wrong)
     assert record_store.load("scene-b") is None and not wrong.exists()
 
@@ -192,13 +192,14 @@ def test_size_bound_evicts_the_least_recently_used(store, monkeypatch):
     size = _files(store)[0].stat().st_size
     monkeypatch.setenv(record_store.ENV_SIZE, str(2.5 * size / 2**20))  # room for two sets
     record_store.save(*_args(b))
-    path_a, path_b = record_store._path(store, "a"), record_store._path(store, "b")
+    path_a, path_b = (record_store.entry_path(store, k, record_store.versions()) for k in ("a", "b"))
     now = time.time()
     os.utime(path_a, (now - 100, now - 100))
     os.utime(path_b, (now - 50, now - 50))
     assert record_store.load("a") is not None  # touched: now the most recently used
     record_store.save(*_args(c))
-    assert sorted(_files(store)) == sorted([path_a, record_store._path(store, "c")])
+    path_c = record_store.entry_path(store, "c", record_store.versions())
+    assert sorted(_files(store)) == sorted([path_a, path_c])
     monkeypatch.setenv(record_store.ENV_SIZE, "0")
     record_store.save(*_args(b))
     assert _files(store) == []

@@ -27,19 +27,21 @@ Failures
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import hashlib
 import json
-import os
 import platform
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bench_sim.io.atomic import atomic_path
-from bench_sim.render.record_store import evict, limit_bytes, package_version, source_fingerprint, store_on
+from bench_sim.render.record_store import (
+    package_version,
+    read_entry,
+    source_fingerprint,
+    store_on,
+    write_entry,
+)
 from bench_sim.runtime.backend import cache_folder
 from bench_sim.version import __version__
 
@@ -71,52 +73,28 @@ def versions() -> dict[str, str]:
     }
 
 
-def _path(folder: Path, key: str) -> Path:
-    ident = json.dumps([key, versions()], sort_keys=True)
-    return folder / (hashlib.sha256(ident.encode()).hexdigest() + ".npz")
+def _read(path: Path, key: str) -> dict[str, Any]:
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"][()]))
+    if meta.get("key") != key or meta.get("versions") != versions():
+        raise ValueError("another key or versions")
+    if not isinstance(meta["columns"], dict):
+        raise ValueError("no columns")
+    columns: dict[str, Any] = meta["columns"]
+    return columns
 
 
 def load(key: str) -> dict[str, Any] | None:
     """The stored columns of ``key``, or ``None``: the store is off, has none, or the file
     cannot be read (then it is deleted). Never raises."""
-    folder = store_dir()
-    if folder is None:
-        return None
-    try:
-        path = _path(folder, key)
-        if not path.is_file():
-            return None
-    except Exception:
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"][()]))
-        if meta.get("key") != key or meta.get("versions") != versions():
-            raise ValueError("another key or versions")
-        if not isinstance(meta["columns"], dict):
-            raise ValueError("no columns")
-        columns: dict[str, Any] = meta["columns"]
-    except Exception:
-        with contextlib.suppress(OSError):
-            path.unlink()
-        return None
-    with contextlib.suppress(OSError):
-        os.utime(path)  # recently used: evicted last
-    return columns
+    return read_entry(store_dir(), key, versions(), lambda path: _read(path, key))
 
 
 def save(key: str, columns: dict[str, Any]) -> None:
     """Store the columns of ``key``, then delete the least recently used files beyond the size
     bound. Nothing when the store is off; a write that fails is skipped (never raises)."""
-    folder = store_dir()
-    if folder is None:
-        return
-    try:
-        path = _path(folder, key)
-        meta = json.dumps({"key": key, "versions": versions(), "columns": columns})
-        folder.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.savez(f, meta=np.array(meta))
-    except Exception:  # read-only or full disk: the columns are only not kept
-        return
-    evict(folder, limit_bytes())
+
+    def members() -> dict[str, Any]:
+        return {"meta": np.array(json.dumps({"key": key, "versions": versions(), "columns": columns}))}
+
+    write_entry(store_dir(), key, versions(), members)
