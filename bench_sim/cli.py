@@ -39,7 +39,7 @@ from bench_sim.fusion.methods import FUSE_METHODS
 from bench_sim.fusion.tonemap import TONEMAP_METHODS
 from bench_sim.io import format_bytes
 from bench_sim.io.interrupts import Terminated, command_signals, signal_raised
-from bench_sim.render import record_store
+from bench_sim.render import kernel_store, record_store, texture_store
 from bench_sim.runtime.backend import choose_backend, versions
 from bench_sim.runtime.resources import available_memory_bytes
 from bench_sim.workflows import area_ptc_job, config_cmd, mtf_cmd, ptc_job, render_job, simulate_summary
@@ -49,6 +49,7 @@ from bench_sim.workflows import simulate as simulate_workflow
 from bench_sim.workflows.dataset import run as dataset_run
 from bench_sim.workflows.design.command import design_command
 from bench_sim.workflows.reproduce import run as reproduce_run
+from bench_sim.workflows.sweep import camera_store
 from bench_sim.workflows.sweep import export as sweep_export
 from bench_sim.workflows.sweep import run as sweep_run
 
@@ -259,8 +260,9 @@ def _user_errors(func: Callable[..., Any]) -> Callable[..., Any]:
 
 @app.command()
 def doctor() -> None:
-    """Print the chosen Mitsuba variant, the LLVM library and why, memory, the light-record
-    cache's folder and size, and versions.
+    """Print the chosen Mitsuba variant, the LLVM library and why, memory, the disk stores'
+    folders and sizes (light records; texture blocks, row kernels and a sweep's camera DR beside
+    them), and versions.
 
     A variant forced by ``BENCH_SIM_VARIANT`` that cannot run here is one line, exit status 2."""
     choice = choose_backend()
@@ -273,6 +275,10 @@ def doctor() -> None:
     print(f"memory      : {format_bytes(mem[0]) + ' available (' + mem[1] + ')' if mem else 'unknown'}")
     folder, (size, files) = record_store.store_dir(), record_store.usage()
     print(f"record cache: {folder} ({size / 2**20:.1f} MiB, {files} sets)" if folder else "record cache: off")
+    for name, store in (("textures", texture_store), ("kernels", kernel_store), ("camera DR", camera_store)):
+        if folder is not None and (here := store.store_dir()) is not None:
+            size, files = record_store.usage(here)
+            print(f"  {name:<10}: {here} ({size / 2**20:.1f} MiB, {files} files)")
     for pkg, ver in versions().items():
         print(f"{pkg:<12}: {ver}")
 

@@ -290,9 +290,10 @@ def _stored(folder: Path) -> list[tuple[int, int, Path]]:
     return sorted(files, key=lambda t: t[0])
 
 
-def usage() -> tuple[int, int]:
-    """``(bytes, files)`` of the record sets in the store (``(0, 0)`` when it is off)."""
-    folder = store_dir()
+def usage(folder: Path | None = None) -> tuple[int, int]:
+    """``(bytes, files)`` of the entries in a store's ``folder`` (default: the record sets of
+    this store; ``(0, 0)`` when it is off)."""
+    folder = store_dir() if folder is None else folder
     files = [] if folder is None else _stored(folder)
     return sum(size for _, size, _ in files), len(files)
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench_sim.render import record_store, records
+from bench_sim.render import kernel_store, record_store, records
 from bench_sim.render.records import LightRecords
 from tests.conftest import tiny_cfg
 
@@ -242,6 +242,14 @@ def test_usage_and_doctor_report_the_store(store, monkeypatch):
     monkeypatch.setattr(cli, "choose_backend", lambda: BackendChoice("scalar_rgb", "scalar", None, "test"))
     res = CliRunner().invoke(cli.app, ["doctor"])
     assert res.exit_code == 0 and f"record cache: {store} ({size / 2**20:.1f} MiB, 2 sets)" in res.stdout
+    # the stores beside it, each with its own folder and size (the kernel store's entry counted)
+    kernel_store.save("k", [(0, 0, np.ones((1, 2, 2, 3), np.float32))])
+    kernels = kernel_store.store_dir()
+    assert kernels is not None and kernels.parent == store.parent
+    k_size = sum(p.stat().st_size for p in kernels.iterdir())
+    said = CliRunner().invoke(cli.app, ["doctor"]).stdout
+    assert f"  kernels   : {kernels} ({k_size / 2**20:.1f} MiB, 1 files)" in said
+    assert "  textures  : " in said and "  camera DR : " in said
     monkeypatch.setenv(record_store.ENV_SWITCH, "off")
     assert record_store.usage() == (0, 0)
     assert "record cache: off" in CliRunner().invoke(cli.app, ["doctor"]).stdout
