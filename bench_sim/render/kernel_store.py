@@ -25,7 +25,6 @@ Failures
 from __future__ import annotations
 
 import functools
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -61,13 +60,10 @@ def versions() -> dict[str, str]:
     }
 
 
-def _read(path: Path, key: str) -> RowKernels:
+def _read(path: Path, meta: dict[str, Any]) -> RowKernels:
+    rows = int(meta["rows"])
     with np.load(path, allow_pickle=False) as z:
-        meta = json.loads(str(z["meta"][()]))
-        if meta.get("key") != key or meta.get("versions") != versions():
-            raise ValueError("another key or versions")
         bases = z["bases"]
-        rows = int(meta["rows"])
         if bases.shape != (rows, 2) or bases.dtype != np.int64:
             raise ValueError("inconsistent bases")
         out: RowKernels = []
@@ -82,16 +78,15 @@ def _read(path: Path, key: str) -> RowKernels:
 def load(key: str) -> RowKernels | None:
     """The stored kernels of ``key``, or ``None``: the store is off, has none, or the file
     cannot be read (then it is deleted). Never raises."""
-    return record_store.read_entry(store_dir(), key, versions(), lambda path: _read(path, key))
+    return record_store.read_entry(store_dir(), key, versions(), _read)
 
 
 def save(key: str, kernels: Sequence[tuple[int, int, np.ndarray]]) -> None:
     """Store the kernels of ``key``, then delete the least recently used files beyond the size
     bound. Nothing when the store is off; a write that fails is skipped (never raises)."""
 
-    def members() -> dict[str, Any]:
-        meta = json.dumps({"key": key, "versions": versions(), "rows": len(kernels)})
+    def arrays() -> dict[str, np.ndarray]:
         bases = np.array([[by, bx] for by, bx, _ in kernels], dtype=np.int64).reshape(len(kernels), 2)
-        return {"meta": np.array(meta), "bases": bases, **{f"w{i}": w for i, (_, _, w) in enumerate(kernels)}}
+        return {"bases": bases, **{f"w{i}": w for i, (_, _, w) in enumerate(kernels)}}
 
-    record_store.write_entry(store_dir(), key, versions(), members)
+    record_store.write_entry(store_dir(), key, versions(), {"rows": len(kernels)}, arrays)

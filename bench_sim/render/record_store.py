@@ -146,11 +146,12 @@ def entry_path(folder: Path, key: str, made_with: Mapping[str, str]) -> Path:
 
 
 def read_entry(folder: Path | None, key: str, made_with: Mapping[str, str],
-               read: Callable[[Path], T]) -> T | None:
-    """``read(path)`` of the stored file of ``key``, or ``None``: the store is off (``folder``
-    ``None``), has no such file, or ``read`` raises (the file is not a complete entry of ``key``
-    made with these versions; it is then deleted). A file read is marked recently used (evicted
-    last). Never raises."""
+               read: Callable[[Path, dict[str, Any]], T]) -> T | None:
+    """``read(path, meta)`` of the stored file of ``key`` (``meta``: its JSON member ``meta``,
+    checked to name ``key`` and these versions ``made_with``), or ``None``: the store is off
+    (``folder`` ``None``), has no such file, or the file is not a complete entry of ``key`` made
+    with these versions (another key or versions in ``meta``, or ``read`` raises; it is then
+    deleted). A file read is marked recently used (evicted last). Never raises."""
     if folder is None:
         return None
     try:
@@ -160,7 +161,11 @@ def read_entry(folder: Path | None, key: str, made_with: Mapping[str, str],
     except Exception:
         return None
     try:
-        value = read(path)
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"][()]))
+        if not isinstance(meta, dict) or meta.get("key") != key or meta.get("versions") != dict(made_with):
+            raise ValueError("another key or versions")
+        value = read(path, meta)
     except Exception:
         _remove(path)
         return None
@@ -169,10 +174,11 @@ def read_entry(folder: Path | None, key: str, made_with: Mapping[str, str],
     return value
 
 
-def write_entry(folder: Path | None, key: str, made_with: Mapping[str, str],
-                members: Callable[[], Mapping[str, Any]]) -> None:
-    """Write ``members()`` (name -> array, ``np.savez``'s members) as the file of ``key``,
-    atomically, then delete the least recently used files of ``folder`` beyond the size bound
+def write_entry(folder: Path | None, key: str, made_with: Mapping[str, str], meta: Mapping[str, Any],
+                arrays: Callable[[], Mapping[str, np.ndarray]] = dict) -> None:
+    """Write the entry of ``key`` atomically: its JSON member ``meta`` (``key``, the versions it
+    was ``made_with`` and ``meta``) and ``arrays()`` (name -> array, ``np.savez``'s members);
+    then delete the least recently used files of ``folder`` beyond the size bound
     (:func:`limit_bytes`). Nothing when the store is off; a write that fails (read-only or full
     disk) is skipped: the entry is only not kept. Never raises."""
     if folder is None:
@@ -180,7 +186,8 @@ def write_entry(folder: Path | None, key: str, made_with: Mapping[str, str],
     try:
         folder.mkdir(parents=True, exist_ok=True)
         path = entry_path(folder, key, made_with)
-        named = dict(members())
+        text = json.dumps({"key": key, "versions": dict(made_with), **meta})
+        named: dict[str, Any] = {"meta": np.array(text), **arrays()}
         with atomic_path(path) as tmp, open(tmp, "wb") as f:
             np.savez(f, **named)
     except Exception:
@@ -193,15 +200,11 @@ def _remove(path: Path) -> None:
         path.unlink()
 
 
-def _read(path: Path, key: str) -> Stored:
-    """The record set in ``path``; ``ValueError`` (or the reader's own error) when the file is
-    not a complete set of ``key`` made with these :func:`versions`."""
-    with np.load(path, allow_pickle=False) as z:
-        meta = json.loads(str(z["meta"][()]))
+def _read(path: Path, meta: dict[str, Any]) -> Stored:
+    """The record set in ``path`` (its ``meta`` checked by :func:`read_entry`); ``ValueError``
+    (or the reader's own error) when the file is not a complete set."""
     arrays = mapped_arrays(path, ARRAYS)
     d_rec, static, position, hit = (arrays[name] for name in ARRAYS)
-    if not isinstance(meta, dict) or meta.get("key") != key or meta.get("versions") != versions():
-        raise ValueError("another key or versions")
     lights = meta.get("lights")
     if not (isinstance(lights, list) and all(isinstance(n, str) for n in lights)):
         raise ValueError("no light names")
@@ -263,19 +266,15 @@ def page_out(arrays: Sequence[np.ndarray]) -> None:
 def load(key: str) -> Stored | None:
     """The stored record set of ``key`` (its light names and arrays), or ``None``: the store is
     off, has no such set, or its file cannot be read (then the file is deleted). Never raises."""
-    return read_entry(store_dir(), key, versions(), lambda path: _read(path, key))
+    return read_entry(store_dir(), key, versions(), _read)
 
 
 def save(key: str, lights: Sequence[str], arrays: Mapping[str, np.ndarray]) -> None:
     """Store the record set of ``key`` (its light names and its :data:`ARRAYS`), then delete the
     least recently used files beyond the size bound. Does nothing when the store is off; a write
     that fails is skipped (never raises)."""
-
-    def members() -> dict[str, Any]:
-        meta = json.dumps({"key": key, "lights": list(lights), "versions": versions()})
-        return {"meta": np.array(meta), **{name: arrays[name] for name in ARRAYS}}
-
-    write_entry(store_dir(), key, versions(), members)
+    write_entry(store_dir(), key, versions(), {"lights": list(lights)},
+                lambda: {name: arrays[name] for name in ARRAYS})
 
 
 def _stored(folder: Path) -> list[tuple[int, int, Path]]:

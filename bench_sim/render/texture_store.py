@@ -28,8 +28,8 @@ Failures
 from __future__ import annotations
 
 import functools
-import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -62,12 +62,9 @@ def versions() -> dict[str, str]:
     }
 
 
-def _read(path: Path, key: str, shape: tuple[int, int]) -> np.ndarray:
-    with np.load(path, allow_pickle=False) as z:
-        meta = json.loads(str(z["meta"][()]))
+def _read(path: Path, meta: dict[str, Any], shape: tuple[int, int]) -> np.ndarray:
     values = record_store.mapped_arrays(path, ("values",))["values"]  # a map of the file, no copy
-    same = meta == {"key": key, "versions": versions()}
-    if not same or values.dtype != np.float32 or values.shape != shape:
+    if set(meta) != {"key", "versions"} or values.dtype != np.float32 or values.shape != shape:
         raise ValueError("another block")
     return values
 
@@ -75,11 +72,10 @@ def _read(path: Path, key: str, shape: tuple[int, int]) -> np.ndarray:
 def load(key: str, shape: tuple[int, int]) -> np.ndarray | None:
     """The stored block of ``key`` (float32 of ``shape``), or ``None``: the store is off, has no
     such block, or its file cannot be read (then it is deleted). Never raises."""
-    return record_store.read_entry(store_dir(), key, versions(), lambda path: _read(path, key, shape))
+    return record_store.read_entry(store_dir(), key, versions(), lambda path, meta: _read(path, meta, shape))
 
 
 def save(key: str, values: np.ndarray) -> None:
     """Store the block ``values`` of ``key``, then delete the least recently used files beyond the
     size bound. Does nothing when the store is off; a write that fails is skipped."""
-    meta = json.dumps({"key": key, "versions": versions()})
-    record_store.write_entry(store_dir(), key, versions(), lambda: {"meta": np.array(meta), "values": values})
+    record_store.write_entry(store_dir(), key, versions(), {}, lambda: {"values": values})

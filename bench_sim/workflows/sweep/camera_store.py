@@ -28,7 +28,6 @@ Failures
 from __future__ import annotations
 
 import functools
-import json
 import platform
 from pathlib import Path
 from typing import Any
@@ -73,28 +72,20 @@ def versions() -> dict[str, str]:
     }
 
 
-def _read(path: Path, key: str) -> dict[str, Any]:
-    with np.load(path, allow_pickle=False) as z:
-        meta = json.loads(str(z["meta"][()]))
-    if meta.get("key") != key or meta.get("versions") != versions():
-        raise ValueError("another key or versions")
-    if not isinstance(meta["columns"], dict):
+def _read(path: Path, meta: dict[str, Any]) -> dict[str, Any]:
+    columns = meta["columns"]
+    if not isinstance(columns, dict):
         raise ValueError("no columns")
-    columns: dict[str, Any] = meta["columns"]
     return columns
 
 
 def load(key: str) -> dict[str, Any] | None:
     """The stored columns of ``key``, or ``None``: the store is off, has none, or the file
     cannot be read (then it is deleted). Never raises."""
-    return read_entry(store_dir(), key, versions(), lambda path: _read(path, key))
+    return read_entry(store_dir(), key, versions(), _read)
 
 
 def save(key: str, columns: dict[str, Any]) -> None:
     """Store the columns of ``key``, then delete the least recently used files beyond the size
     bound. Nothing when the store is off; a write that fails is skipped (never raises)."""
-
-    def members() -> dict[str, Any]:
-        return {"meta": np.array(json.dumps({"key": key, "versions": versions(), "columns": columns}))}
-
-    write_entry(store_dir(), key, versions(), members)
+    write_entry(store_dir(), key, versions(), {"columns": columns})
