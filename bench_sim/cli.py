@@ -276,7 +276,7 @@ def doctor() -> None:
     folder, (size, files) = record_store.store_dir(), record_store.usage()
     print(f"record cache: {folder} ({size / 2**20:.1f} MiB, {files} sets)" if folder else "record cache: off")
     for name, store in (("textures", texture_store), ("kernels", kernel_store), ("camera DR", camera_store)):
-        if folder is not None and (here := store.store_dir()) is not None:
+        if (here := store.store_dir()) is not None:  # off with the record store
             size, files = record_store.usage(here)
             print(f"  {name:<10}: {here} ({size / 2**20:.1f} MiB, {files} files)")
     for pkg, ver in versions().items():
