@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from bench_sim.config import BenchConfig, load_config, with_overrides
+from bench_sim.render import record_store
 
 # a skip fails the session unless listed in tests/allowed_skips.txt (--strict-skips, or CI set)
 from tests.skip_guard import (  # noqa: F401 - pytest's hooks, found by name
@@ -42,6 +43,16 @@ def _a_test_process_stays_one() -> Iterator[None]:
     interrupts = sys.modules.get("bench_sim.io.interrupts")
     assert "bench_sim.__main__" not in sys.modules and not getattr(interrupts, "_OWN_PROCESS", False), (
         "this test made the test process bench-sim's own (it imported bench_sim.__main__)")
+
+
+@pytest.fixture
+def disk_stores(monkeypatch: pytest.MonkeyPatch, tmp_path: Any) -> Any:
+    """The disk stores (records, textures, kernels, a sweep's camera) turned on, at their default
+    size bound, in a fresh cache folder; that folder."""
+    monkeypatch.setenv("BENCH_SIM_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv(record_store.ENV_SWITCH, "on")
+    monkeypatch.delenv(record_store.ENV_SIZE, raising=False)
+    return tmp_path / "cache"
 
 
 def make_cfg(**sections: Any) -> BenchConfig:

@@ -13,13 +13,10 @@ from tests.conftest import tiny_cfg
 
 
 @pytest.fixture
-def store(monkeypatch, tmp_path):
+def store(disk_stores):
     """The stores turned on in a fresh cache folder; the kernels' folder."""
-    monkeypatch.setenv("BENCH_SIM_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setenv(record_store.ENV_SWITCH, "on")
-    monkeypatch.delenv(record_store.ENV_SIZE, raising=False)
     folder = kernel_store.store_dir()
-    assert folder == tmp_path / "cache" / "kernels"
+    assert folder == disk_stores / "kernels"
     return folder
 
 

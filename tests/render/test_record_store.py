@@ -20,13 +20,10 @@ VARIANT = "llvm_ad_mono"
 
 
 @pytest.fixture
-def store(monkeypatch, tmp_path) -> Path:
+def store(disk_stores):
     """The store turned on in a fresh cache folder; its records folder."""
-    monkeypatch.setenv("BENCH_SIM_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setenv(record_store.ENV_SWITCH, "on")
-    monkeypatch.delenv(record_store.ENV_SIZE, raising=False)
     folder = record_store.store_dir()
-    assert folder == tmp_path / "cache" / "records"
+    assert folder == disk_stores / "records"
     return folder
 
 

@@ -18,12 +18,10 @@ LEVELS = 8
 
 
 @pytest.fixture
-def store(monkeypatch, tmp_path):
+def store(disk_stores):
     """The stores turned on in a fresh cache folder; the camera columns' folder."""
-    monkeypatch.setenv("BENCH_SIM_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setenv(record_store.ENV_SWITCH, "on")
     folder = camera_store.store_dir()
-    assert folder == tmp_path / "cache" / "camera_dr"
+    assert folder == disk_stores / "camera_dr"
     return folder
 
 
