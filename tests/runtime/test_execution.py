@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -158,3 +160,19 @@ def test_meanwhile_runs_here_once_the_tasks_are_on_the_cluster_and_never_in_proc
                         meanwhile=meanwhile)
     assert calls == [threading.current_thread().name]
     assert [o.ok for o in out] == [True, True] and sorted(seen) == [0, 1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("user_value", [None, "1048576"])
+def test_local_workers_start_without_dasks_trim_threshold(monkeypatch, user_value: str | None) -> None:
+    """Dask's nannies start a worker with ``MALLOC_TRIM_THRESHOLD_=65536`` (glibc's dynamic mmap
+    threshold off: each large array of a point is page-faulted again); a local cluster of
+    bench_sim's starts its workers without it, and keeps a value the user set."""
+    if user_value is None:
+        monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    else:
+        monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", user_value)
+    with open_client(workers=1) as client:
+        seen = client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_")
+    assert list(seen.values()) == [user_value]
+    assert os.environ.get("MALLOC_TRIM_THRESHOLD_") == user_value  # nor set in this process
