@@ -15,7 +15,8 @@ Steps of :func:`run_dataset`:
    space (:func:`estimate_bytes`). Each refusal is one line.
 2. **Lay out** ``DIR`` (:mod:`bench_sim.workflows.dataset.reader` lists the files): ``dataset.json`` and an
    empty ``data.zarr`` with the full schema are made in a temporary folder and renamed into
-   place.
+   place (:class:`~bench_sim.workflows.dataset.writer.DatasetFolder`). On a cluster this is done
+   once the samples are submitted, while the first ones are made; nothing is written before it.
 3. **Run** the samples on the execution layer (:mod:`bench_sim.runtime.execution`: a
    ``LocalCluster`` or ``--scheduler``). Workers return arrays; this process writes each
    sample's chunks into ``data.zarr`` as it completes and only then its record
@@ -47,39 +48,35 @@ from bench_sim.config import BenchConfig, config_sha256
 from bench_sim.errors import BenchSimError, note_kept
 from bench_sim.io import check_free_space, format_bytes, write_json
 from bench_sim.io.folder_lock import folder_lock
-from bench_sim.io.interrupts import deferred_interrupts
 from bench_sim.io.ownership import entries
 from bench_sim.metrics.fusion_truth import LIGHT_RATIO_TOLERANCE
 from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
 from bench_sim.pipeline import physical_coords, run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
-from bench_sim.runtime.execution import Shared, TaskOutcome, open_client, release_client, run_tasks
+from bench_sim.runtime.execution import Shared, open_client, release_client, run_tasks
 from bench_sim.runtime.preload import FIGURES, import_modules
-from bench_sim.runtime.progress import ProgressBar, progress_bar
+from bench_sim.runtime.progress import progress_bar
 from bench_sim.sensor.model import stage_mean_var_dn
 from bench_sim.workflows.dataset.card import write_card
 from bench_sim.workflows.dataset.reader import (
     COMPLETION_RECORD,
-    DATA_STORE,
     FUSED_VARIABLES,
     STAGE_VARIABLES,
-    journal,
     read_records,
 )
 from bench_sim.workflows.dataset.sample_scene import SampleScene, peak_signal_fraction, scale_lights
 from bench_sim.workflows.dataset.spec import DatasetSpec, check_sample_configs, load_spec, sample_streams
-from bench_sim.workflows.dataset.splits import split_map
 from bench_sim.workflows.dataset.store import (
     bytes_per_sample,
     check_folder,
     estimate_bytes,
-    lay_out,
     manifest_frame,
     manifest_meta,
     write_manifest,
 )
-from bench_sim.workflows.dataset.targets import fixed_camera, recorded_values, strict_json
+from bench_sim.workflows.dataset.targets import fixed_camera, recorded_values
+from bench_sim.workflows.dataset.writer import DatasetFolder, SampleWriter
 from bench_sim.workflows.preflight import preflight_tasks
 
 if TYPE_CHECKING:
@@ -100,8 +97,6 @@ __all__ = [
 
 #: what the samples, the manifest and the card are written with (imported while samples run)
 WRITE_MODULES = ("xarray", "zarr", "pyarrow", *FIGURES)
-#: Seconds between manifest rewrites during a run
-MANIFEST_EVERY_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -340,9 +335,13 @@ def _scene_values(values: dict[str, Any]) -> dict[str, float]:
     return {k.removeprefix("scene."): float(v) for k, v in values.items() if k.startswith("scene.")}
 
 
-def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool) -> _SampleWriter:
-    """Make the samples to do, writing each as it completes (:data:`WRITE_MODULES` imported meanwhile);
-    the manifest of what is on disk is written if the run stops (Ctrl-C, a lost scheduler)."""
+def _run_samples(
+    plan: _Plan, client: Any, meta: dict[str, Any], progress: bool, folder: DatasetFolder
+) -> SampleWriter:
+    """Make the samples to do, writing each as it completes; on a cluster the folder is made ready
+    and :data:`WRITE_MODULES` imported while the first samples are made (in this process: the
+    folder first). The manifest of what is on disk is written if the run stops (Ctrl-C, a lost
+    scheduler)."""
     spec, todo = plan.spec, plan.todo
     camera_seed = spec.seed if spec.camera == "fixed" else None
     tasks = [SampleTask(i, plan.planned[i], spec.stages, sample_streams(spec.seed, i)[1], camera_seed,
@@ -350,13 +349,20 @@ def _run_samples(plan: _Plan, client: Any, meta: dict[str, Any], progress: bool)
     skipped = spec.samples - len(todo)
     note = f"({skipped} already complete)" if skipped else ""
     with progress_bar("dataset", len(todo), "samples", enabled=progress, note=note) as bar:
-        writer = _SampleWriter(plan.out, spec, plan.values, meta, bar)
+        writer = SampleWriter(plan.out, spec, plan.values, meta, bar)
+
+        def meanwhile() -> None:
+            folder.prepare()
+            import_modules(WRITE_MODULES)
+
+        if client is None:
+            folder.prepare()
         try:
             run_tasks(make_sample, tasks, client=client, indices=todo, keep_values=False,
-                      on_result=writer.write, shared=sample_inputs(tasks),
-                      meanwhile=lambda: import_modules(WRITE_MODULES))
+                      on_result=writer.write, shared=sample_inputs(tasks), meanwhile=meanwhile)
         except BaseException:
-            write_manifest(plan.out, spec, meta, plan.values)  # what is on disk now
+            if folder.ready:
+                write_manifest(plan.out, spec, meta, plan.values)  # what is on disk now
             raise
     return writer
 
@@ -412,18 +418,15 @@ def _plan_and_run(
     run = DatasetRun(out=out, samples=spec.samples)
     # the execution layer first (refused before anything is laid out at --out if it cannot start)
     cluster = open_client(workers=workers, scheduler=scheduler) if plan.todo else contextlib.nullcontext()
-    laid_out = False
+    folder = DatasetFolder(spec, out, plan.action)  # made ready while the first samples run
     try:
         with cluster as client:
-            if plan.action == "create":
-                lay_out(spec, out)
-            laid_out = True
             meta = manifest_meta(spec)
-            (out / COMPLETION_RECORD).unlink(missing_ok=True)  # rewritten last if the dataset completes
             if not plan.todo:
+                folder.prepare()
                 run.complete = len(plan.done_before)
             else:
-                writer = _run_samples(plan, client, meta, progress)
+                writer = _run_samples(plan, client, meta, progress, folder)
                 run.ran, run.failed = writer.ran, writer.failed
                 run.complete = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
             release_client(client)  # the cluster closes while the manifest and card are written
@@ -435,59 +438,12 @@ def _plan_and_run(
                 "spec_sha256": meta["spec_sha256"], "samples": spec.samples, "files": entries(out),
             })
     except BaseException as exc:
-        if laid_out:  # while the samples run, the cluster closes or the manifest and card are written
+        if folder.ready:  # while the samples run, the cluster closes or the manifest and card are written
             done = sum(1 for r in read_records(out).values() if r.get("status") == "complete")
             note_kept(exc, f"{done} of {spec.samples} samples complete are kept in {out}; finish with "
                            f"'bench-sim dataset {spec_path} --out {out} --resume'")
         raise
     return run
-
-
-class _SampleWriter:
-    """Writes each outcome as it arrives: arrays into ``data.zarr``, then the record (the
-    journal, :mod:`bench_sim.runtime.journal`); the manifest every :data:`MANIFEST_EVERY_S`
-    seconds; advances the progress bar."""
-
-    def __init__(self, out: Path, spec: DatasetSpec, values: Sequence[dict[str, Any]], meta: dict[str, Any],
-                 bar: ProgressBar):
-        import zarr
-
-        self.out, self.spec, self.values, self.meta, self.bar = out, spec, values, meta, bar
-        # a group of arrays, by name
-        self.group: Any = zarr.open_group(str(out / DATA_STORE), mode="r+", use_consolidated=False)
-        self.journal = journal(out)
-        self.splits = split_map(spec.seed, spec.samples, spec.splits)
-        self.ran: list[int] = []
-        self.failed: dict[int, str] = {}
-        self._last_manifest = time.monotonic()
-
-    def write(self, outcome: TaskOutcome) -> None:
-        i = int(outcome.index)
-        # --only on a complete sample: not complete while it is rewritten
-        self.journal.path(i).unlink(missing_ok=True)
-        rec: dict[str, Any] = {
-            "sample": i, "seed": self.spec.seed,
-            "values": self.values[i],
-            "split": self.splits[i],
-            "spec_sha256": self.spec.identity(),  # --resume takes only this spec's and seed's records
-            "wall_s": round(float(outcome.wall_s), 4), "worker": str(outcome.worker),
-        }
-        if outcome.ok:
-            value: SampleOutput = outcome.value
-            with deferred_interrupts():  # Zarr writes on its own thread: never cut (docs/reliability.md)
-                for name, arr in value.arrays.items():
-                    self.group[name][i] = np.asarray(arr, dtype=self.group[name].dtype)
-            rec.update(status="complete", metrics=value.metrics, **value.info)
-        else:
-            rec.update(status="failed", error=outcome.error)
-            self.failed[i] = str(outcome.error)
-            self.bar.note(f"{len(self.failed)} failed")
-        self.journal.write(strict_json(rec))  # after the arrays: a record says they are on disk
-        self.ran.append(i)
-        self.bar.advance()
-        if time.monotonic() - self._last_manifest > MANIFEST_EVERY_S:
-            write_manifest(self.out, self.spec, self.meta, self.values)
-            self._last_manifest = time.monotonic()
 
 
 def main_summary(run: DatasetRun) -> str:
