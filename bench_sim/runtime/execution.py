@@ -408,9 +408,9 @@ def _run_on(
             if s.key not in made:
                 made[s.key] = client.submit(_make_shared, s.func, s.arg, pure=False, priority=1)
     if made:
-        futures = [
-            client.submit(_run_one, func, i, arg, *(made[s.key] for s in need), pure=False)
-            for i, arg, need in zip(idx, args, needs, strict=True)
+        futures = [  # in the order given: Dask would start tasks whose inputs are ready in any order
+            client.submit(_run_one, func, i, arg, *(made[s.key] for s in need), pure=False, priority=-k)
+            for k, (i, arg, need) in enumerate(zip(idx, args, needs, strict=True))
         ]
     else:
         futures = client.map(_run_one, [func] * len(args), idx, list(args), pure=False)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import os
 
 import numpy as np
@@ -176,3 +177,17 @@ def test_local_workers_start_without_dasks_trim_threshold(monkeypatch, user_valu
         seen = client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_")
     assert list(seen.values()) == [user_value]
     assert os.environ.get("MALLOC_TRIM_THRESHOLD_") == user_value  # nor set in this process
+
+
+def _started(_arg: int, _shared: int) -> int:
+    """A task: the how-manieth task of its worker process it is (0, 1, ...)."""
+    return next(worker_cache("started", itertools.count))
+
+
+@pytest.mark.slow
+def test_tasks_waiting_for_a_shared_input_start_in_the_order_given() -> None:
+    """Dask starts the tasks whose inputs became ready together in an order of its own; a run's
+    tasks start in its order (a dataset's first, often longest, sample is not left for last)."""
+    with open_client(workers=1) as client:
+        out = run_tasks(_started, list(range(8)), client=client, shared=[(Shared("in", abs, 1),)] * 8)
+    assert [o.value for o in out] == list(range(8))
