@@ -317,10 +317,21 @@ def run_pass(
     _stream(cfg, setup, fp, noise, st, lines_out, stage_truth, timings, on_frames)
     if array_sink is None:
         return PassResult({}, setup, timings, truth=truth)
-    dn = {m: array_sink.arrays["dn"][s] for s, m in enumerate(st)}
-    attrs = functools.partial(pass_attrs, cfg, seed, setup, fused="gamma_hdr" in array_sink.arrays)
-    return PassResult(dn, setup, timings, truth=truth, arrays=array_sink, stages=st if tst is None else tst,
-                      make_attrs=attrs, make_dataset=functools.partial(_make_dataset, cfg))
+    return _result(cfg, seed, setup, timings, (st, tst), array_sink)
+
+
+def _result(
+    cfg: BenchConfig, seed: int | np.random.SeedSequence | np.random.Generator, setup: RenderSetup,
+    timings: dict[str, float], stage_sets: tuple[tuple[int, ...], tuple[int, ...] | None], arrays: ArraySink,
+) -> PassResult:
+    """The :class:`PassResult` of a pass kept in ``arrays`` (stages ``st``, truth of stages ``tst``:
+    ``stage_sets``): its dataset at the stages of its truth, its attributes made when first read."""
+    st, tst = stage_sets
+    dn = {m: arrays.arrays["dn"][s] for s, m in enumerate(st)}
+    attrs = functools.partial(pass_attrs, cfg, seed, setup, fused="gamma_hdr" in arrays.arrays)
+    return PassResult(dn, setup, timings, truth=tst is not None, arrays=arrays,
+                      stages=st if tst is None else tst, make_attrs=attrs,
+                      make_dataset=functools.partial(_make_dataset, cfg))
 
 
 def _pass_truth(
