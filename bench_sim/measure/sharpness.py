@@ -23,7 +23,7 @@ near-vertical ones. Frequencies are in cycles per pixel of the image: per line a
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -33,6 +33,7 @@ from bench_sim.config import BenchConfig
 from bench_sim.errors import BenchSimError
 from bench_sim.metrics.edge_rois import EdgeROI, slanted_edge_rois
 from bench_sim.metrics.sfr import edge_sfr, mtf50
+from bench_sim.pipeline import Read
 from bench_sim.sensor.model import stage_offset_dn
 
 if TYPE_CHECKING:
@@ -116,10 +117,6 @@ def image_sharpness(
     return {d: direction_sfr(img, rois, o, clipped) for d, o in DIRECTIONS.items()}
 
 
-#: ``read(name, stage)``: a pass's variable ``name`` of stage ``stage`` (``None``: an image variable)
-Read = Callable[[str, "int | None"], np.ndarray]
-
-
 def _dataset_reader(ds: xr.Dataset) -> Read:
     return lambda name, m: ds[name].values if m is None else ds[name].sel(stage=m).values
 
@@ -183,8 +180,9 @@ def pass_sharpness(
     read: Read, stages: Sequence[int], has: set[str], cfg: BenchConfig
 ) -> PassSharpness | None:
     """The e-SFR of every stage and of ``gamma_hdr`` in both directions (module docstring) of a
-    pass's variables ``has`` read by ``read``; ``None`` when its reflectance (of the first stage)
-    holds no whole dark square."""
+    pass's variables ``has`` read by ``read`` (a dataset's, or a :class:`~bench_sim.pipeline.PassResult`'s
+    :meth:`~bench_sim.pipeline.PassResult.read` without one); ``None`` when its reflectance (of the
+    first stage) holds no whole dark square."""
     rois = slanted_edge_rois(read("reflectance", stages[0]))
     if not rois:
         return None

@@ -43,6 +43,11 @@ on the thread pool (:mod:`bench_sim.runtime.parallel`) while the stages accumula
 the dataset's variables and units, the stored dtypes of ``simulate`` and the data sets and the
 resource estimates
 (:func:`stage_pixel_bytes`) all follow it.
+
+A :class:`PassResult` gives its arrays, stages and attributes without the dataset
+(:meth:`PassResult.read`, a :data:`Read`; :meth:`PassResult.values`, ``stages``, ``variables``,
+``attrs``): the code a worker runs for a sweep point or a data set's sample reads them there and
+never imports xarray (nor pandas, nor Dask's arrays), ~1 s of CPU per worker process.
 """
 
 from bench_sim.pipeline.one_pass import (
@@ -50,6 +55,7 @@ from bench_sim.pipeline.one_pass import (
     SENSOR_CHUNK_FRAMES,
     TRUTH_BAND_LINES,
     PassResult,
+    Read,
     pass_loops,
     run_pass,
 )
@@ -77,7 +83,7 @@ from bench_sim.pipeline.variables import (
 )
 
 __all__ = [
-    "run_pass", "PassResult", "Variable", "PASS_VARIABLES", "VARIABLES_BY_NAME", "STAGE_DIMS",
+    "run_pass", "PassResult", "Read", "Variable", "PASS_VARIABLES", "VARIABLES_BY_NAME", "STAGE_DIMS",
     "IMAGE_DIMS", "WORD", "pass_variables", "stage_pixel_bytes", "SENSOR_CHUNK_FRAMES",
     "RENDER_CHUNK_FRAMES", "TRUTH_BAND_LINES", "pass_dtypes", "pass_coords", "pass_attrs", "COORD_ATTRS",
     "pass_loops", "variable_attrs", "CHUNK_PIXELS", "constant_attrs", "physical_coords", "store_chunks",

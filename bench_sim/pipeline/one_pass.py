@@ -38,7 +38,8 @@ if TYPE_CHECKING:
     import xarray as xr
 
 __all__ = [
-    "run_pass", "PassResult", "SENSOR_CHUNK_FRAMES", "RENDER_CHUNK_FRAMES", "TRUTH_BAND_LINES", "pass_loops",
+    "run_pass", "PassResult", "Read", "SENSOR_CHUNK_FRAMES", "RENDER_CHUNK_FRAMES", "TRUTH_BAND_LINES",
+    "pass_loops",
 ]
 
 #: Frames exposed per vectorised sensor call (the temporal noise depends on it: fixed).
@@ -50,6 +51,10 @@ RENDER_CHUNK_FRAMES = 64
 TRUTH_BAND_LINES = 64
 
 
+#: ``read(name, stage)``: a pass's variable ``name`` of stage ``stage`` (``None``: an image variable)
+Read = Callable[[str, "int | None"], np.ndarray]
+
+
 @dataclass
 class PassResult:
     """What :func:`run_pass` returns.
@@ -59,7 +64,9 @@ class PassResult:
     dataset
         The simulation (see the module docstring); without ``mean_dn``, ``photons``,
         ``reflectance`` and ``clipped`` when run with ``truth=False``. Built when first read
-        (a caller that only needs ``stage_dn`` does not import xarray).
+        (a caller that only needs ``stage_dn`` does not import xarray). Its arrays, stages and
+        attributes are also here without it: :meth:`read`, :meth:`values`, ``stages``,
+        ``variables``, ``attrs`` (what a worker reads without importing xarray).
     stage_dn
         Stage ``m`` -> (lines, N) stage words, ``uint16`` for ``beta <= 16`` (the default 12),
         else ``uint32`` (:func:`bench_sim.sensor.model.word_dtype`; the arrays behind
@@ -74,15 +81,22 @@ class PassResult:
         (busy time of each; rendering runs ahead in its own thread and the chunks are exposed
         on the thread pool, so they overlap); ``pass_wall``, the wall time of the streaming
         pass they share.
+    stages
+        The stages of ``dataset`` (its ``stage`` coordinate): the pass's, or those of its truth
+        when run with ``truth_stages``.
     """
 
     stage_dn: dict[int, np.ndarray]
     setup: RenderSetup
     timings_s: dict[str, float] = field(default_factory=dict)
-    make_dataset: Callable[[], xr.Dataset] | None = field(default=None, repr=False)
     truth: bool = False
     #: the arrays behind ``dataset`` (:class:`~bench_sim.sensor.pass_lines.ArraySink`), ``None`` with a sink
     arrays: ArraySink | None = field(default=None, repr=False)
+    stages: tuple[int, ...] = ()
+    #: the dataset's attributes when first read (:func:`~bench_sim.pipeline.store_schema.pass_attrs`)
+    make_attrs: Callable[[], dict[str, Any]] | None = field(default=None, repr=False)
+    #: the dataset of ``variables`` and ``attrs`` (:func:`_make_dataset`)
+    make_dataset: Callable[[PassResult], xr.Dataset] | None = field(default=None, repr=False)
 
     def stage_array(self, name: str, stage: int) -> np.ndarray:
         """Stage variable ``name`` of stage ``stage``: the array behind
@@ -90,6 +104,33 @@ class PassResult:
         if self.arrays is None or name not in self.arrays.index or stage not in self.arrays.index[name]:
             raise BenchSimError(f"PassResult: no {name} of stage {stage}")
         return self.arrays.arrays[name][self.arrays.index[name][stage]]
+
+    def read(self, name: str, stage: int | None) -> np.ndarray:
+        """A :data:`Read` of the pass: stage variable ``name`` of ``stage`` (:meth:`stage_array`),
+        or the image variable ``name`` (``stage`` ``None``): the array behind
+        ``dataset[name].sel(stage=stage)`` / ``dataset[name]``, without xarray."""
+        if stage is not None:
+            return self.stage_array(name, stage)
+        if self.arrays is None or name in self.arrays.index or name not in self.arrays.arrays:
+            raise BenchSimError(f"PassResult: no image variable {name}")
+        return self.arrays.arrays[name]
+
+    def values(self, name: str) -> np.ndarray:
+        """The array behind ``dataset[name].values``: (stage, line, column) at :attr:`stages` for
+        a stage variable (``dn`` at the stages of the truth only when it has fewer), (line,
+        column) for an image variable."""
+        if self.arrays is None or name not in self.arrays.arrays:
+            raise BenchSimError(f"PassResult: no {name}")
+        arr = self.arrays.arrays[name]
+        held = tuple(self.arrays.index.get(name, {}))
+        if name not in self.arrays.index or held == self.stages:
+            return arr
+        return arr[[self.arrays.index[name][m] for m in self.stages]]
+
+    @property
+    def variables(self) -> set[str]:
+        """The names of the pass's variables held (``dataset``'s data variables)."""
+        return set() if self.arrays is None else set(self.arrays.arrays)
 
     def drop(self, *names: str) -> None:
         """Let go of the arrays of the stage variables ``names`` (a caller done with them, e.g.
@@ -101,10 +142,18 @@ class PassResult:
                 self.arrays.index.pop(name, None)
 
     @functools.cached_property
+    def attrs(self) -> dict[str, Any]:
+        """The attributes of ``dataset`` (:func:`~bench_sim.pipeline.store_schema.pass_attrs`:
+        config, seed, version, engine, ``t_int_s``, the sensor's constants, ...), without xarray."""
+        if self.make_attrs is None:
+            raise BenchSimError("PassResult: no attributes")
+        return self.make_attrs()
+
+    @functools.cached_property
     def dataset(self) -> xr.Dataset:
         if self.make_dataset is None:
             raise BenchSimError("PassResult: no dataset")
-        return self.make_dataset()
+        return self.make_dataset(self)
 
 
 # --- the steps of a pass -------------------------------------------------------------------------
@@ -174,29 +223,20 @@ def _stream(
         raise BenchSimError(f"simulate: the pass gave only {min(done.values())} of {lines} lines")
 
 
-def _make_dataset(
-    cfg: BenchConfig,
-    seed: int | np.random.SeedSequence | np.random.Generator,
-    setup: RenderSetup,
-    st: tuple[int, ...],
-    arrays: dict[str, np.ndarray],
-    truth_st: tuple[int, ...] | None = None,
-) -> xr.Dataset:
-    """The pass's :class:`xarray.Dataset` (see the module docstring) of its arrays; of a pass
-    whose truth covers some stages only (``truth_st``), at those stages (their words too)."""
+def _make_dataset(cfg: BenchConfig, sim: PassResult) -> xr.Dataset:
+    """The pass's :class:`xarray.Dataset` (see the module docstring) of its arrays
+    (:meth:`PassResult.values`, at its ``stages``) and attributes (:attr:`PassResult.attrs`)."""
     import xarray as xr
 
-    if truth_st is not None and truth_st != st:
-        arrays = dict(arrays, dn=arrays["dn"][[st.index(m) for m in truth_st]])
-        st = truth_st
-
-    data: dict[str, Any] = {v.name: (v.dims, arrays[v.name]) for v in PASS_VARIABLES if v.name in arrays}
-    ds = xr.Dataset(data, coords=pass_coords(cfg, st))
+    data: dict[str, Any] = {
+        v.name: (v.dims, sim.values(v.name)) for v in PASS_VARIABLES if v.name in sim.variables
+    }
+    ds = xr.Dataset(data, coords=pass_coords(cfg, sim.stages))
     for name, var in ds.data_vars.items():
         var.attrs.update(variable_attrs(cfg, str(name)))
     for name, attrs in COORD_ATTRS.items():
         ds[name].attrs.update(attrs)
-    ds.attrs.update(pass_attrs(cfg, seed, setup, fused="gamma_hdr" in arrays))
+    ds.attrs.update(sim.attrs)
     return ds
 
 
@@ -276,10 +316,22 @@ def run_pass(
     stage_truth = None if tst is None else _pass_truth(cfg, setup, fp, tst, n_rows, timings, keep)
     _stream(cfg, setup, fp, noise, st, lines_out, stage_truth, timings, on_frames)
     if array_sink is None:
-        return PassResult({}, setup, timings, None, truth=truth)
-    dn = {m: array_sink.arrays["dn"][s] for s, m in enumerate(st)}
-    make = functools.partial(_make_dataset, cfg, seed, setup, st, array_sink.arrays, tst)
-    return PassResult(dn, setup, timings, make, truth=truth, arrays=array_sink)
+        return PassResult({}, setup, timings, truth=truth)
+    return _result(cfg, seed, setup, timings, (st, tst), array_sink)
+
+
+def _result(
+    cfg: BenchConfig, seed: int | np.random.SeedSequence | np.random.Generator, setup: RenderSetup,
+    timings: dict[str, float], stage_sets: tuple[tuple[int, ...], tuple[int, ...] | None], arrays: ArraySink,
+) -> PassResult:
+    """The :class:`PassResult` of a pass kept in ``arrays`` (stages ``st``, truth of stages ``tst``:
+    ``stage_sets``): its dataset at the stages of its truth, its attributes made when first read."""
+    st, tst = stage_sets
+    dn = {m: arrays.arrays["dn"][s] for s, m in enumerate(st)}
+    attrs = functools.partial(pass_attrs, cfg, seed, setup, fused="gamma_hdr" in arrays.arrays)
+    return PassResult(dn, setup, timings, truth=tst is not None, arrays=arrays,
+                      stages=st if tst is None else tst, make_attrs=attrs,
+                      make_dataset=functools.partial(_make_dataset, cfg))
 
 
 def _pass_truth(

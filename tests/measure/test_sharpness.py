@@ -220,15 +220,22 @@ def test_sweep_columns_mtf50_of_the_fused_stages(passes) -> None:
     from bench_sim.workflows.sweep.point import _sharpness_columns
 
     cfg = _bench(0.2)
-    ds = run_pass(cfg, (2, 16), 1).dataset  # the stages of a sweep point: mu1, mu2 and Gamma_HDR
-    rec = _sharpness_columns(cfg, ds)
+    sim = run_pass(cfg, (2, 16), 1)  # the stages of a sweep point: mu1, mu2 and Gamma_HDR
+    rec = _sharpness_columns(cfg, sim)  # read off the pass's arrays: no dataset built
+    assert "dataset" not in vars(sim)
     assert set(rec) <= set(COLUMNS) and len(rec) == 6
     full = passes[0.2]
     for d in ("along", "across"):
         assert rec[f"mtf50_{d}_gamma1"] == pytest.approx(float(full[f"mtf50_{d}"].sel(stage=2)), rel=1e-9)
         assert rec[f"mtf50_{d}_gamma2"] == pytest.approx(float(full[f"mtf50_{d}"].sel(stage=16)), rel=1e-9)
+    # the same bits as simulate's path through the pass's dataset
+    same = add_sharpness(sim.dataset, cfg)
+    for d in ("along", "across"):
+        assert rec[f"mtf50_{d}_gamma1"] == float(same[f"mtf50_{d}"].sel(stage=2))
+        assert rec[f"mtf50_{d}_gamma2"] == float(same[f"mtf50_{d}"].sel(stage=16))
+        assert rec[f"mtf50_{d}_gamma_hdr"] == float(same[f"gamma_hdr_mtf50_{d}"])
     assert rec["mtf50_along_gamma2"] < 0.6 * rec["mtf50_along_gamma1"]
-    assert _sharpness_columns(make_cfg(), ds) == dict.fromkeys(rec)  # no slanted edges: empty
+    assert _sharpness_columns(make_cfg(), sim) == dict.fromkeys(rec)  # no slanted edges: empty
 
 
 def test_written_with_the_simulation(passes, tmp_path) -> None:

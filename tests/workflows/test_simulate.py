@@ -11,7 +11,7 @@ import pytest
 import bench_sim
 from bench_sim.config import config_from_dict, config_to_toml_dict
 from bench_sim.errors import BenchSimError
-from bench_sim.pipeline import PASS_VARIABLES, stage_pixel_bytes, stored_dataset
+from bench_sim.pipeline import PASS_VARIABLES, VARIABLES_BY_NAME, stage_pixel_bytes, stored_dataset
 from bench_sim.sensor import stage_mean_var_dn
 from bench_sim.sensor.model import stage_offset_dn
 from bench_sim.workflows.dataset.reader import FUSED_VARIABLES, STAGE_VARIABLES
@@ -235,6 +235,35 @@ def test_truth_of_some_stages_is_the_truth_of_those_stages():
         assert np.array_equal(part.dataset[name].values, want), name
     for name in ("gamma_hdr", "gamma_hdr_source"):
         assert np.array_equal(part.dataset[name].values, full.dataset[name].values, equal_nan=True), name
+
+
+@pytest.mark.parametrize("truth, some", [(True, None), (True, (2, 8)), (False, None)])
+def test_a_pass_reads_its_dataset_without_building_it(truth, some):
+    """``PassResult.read``, ``values``, ``stages``, ``variables`` and ``attrs``: the dataset's
+    arrays (by stage, the words of a pass whose truth has fewer stages too), its stages, its
+    variables and its attributes, read without building it (what a sweep point and a sample read
+    in a worker that never imports xarray)."""
+    from bench_sim.pipeline import run_pass
+
+    cfg = config_from_dict(_overrides(lights={"strong": {"irradiance_w_m2": 900.0}}))
+    sim = run_pass(cfg, [1, 2, 8], 5, truth=truth, truth_stages=some)
+    stages = sim.stages
+    per_stage = {n for n in sim.variables if "stage" in VARIABLES_BY_NAME[n].dims}
+    got = {n: (sim.values(n), {m: sim.read(n, m) for m in (stages if n in per_stage else (None,))})
+           for n in sorted(sim.variables)}
+    attrs = dict(sim.attrs)
+    assert "dataset" not in vars(sim)  # not built by any of the reads
+    ds = sim.dataset
+    assert stages == tuple(int(m) for m in ds.stage.values) == (some or (1, 2, 8))
+    assert set(got) == {str(n) for n in ds.data_vars} and attrs == ds.attrs
+    for name, (values, by_stage) in got.items():
+        want = ds[name].values
+        assert values.dtype == want.dtype and np.array_equal(values, want, equal_nan=True), name
+        for m, arr in by_stage.items():
+            want = ds[name].values if m is None else ds[name].sel(stage=m).values
+            assert np.array_equal(arr, want, equal_nan=True), (name, m)
+    with pytest.raises(BenchSimError, match="no image variable dn"):
+        sim.read("dn", None)
 
 
 @pytest.mark.parametrize("keep", [

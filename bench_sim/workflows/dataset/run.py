@@ -40,7 +40,7 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -51,7 +51,7 @@ from bench_sim.io.folder_lock import folder_lock
 from bench_sim.io.ownership import entries
 from bench_sim.metrics.fusion_truth import LIGHT_RATIO_TOLERANCE
 from bench_sim.metrics.truth import region_masks, saturated_fraction, scene_dynamic_range_db, truth_snr
-from bench_sim.pipeline import physical_coords, run_pass
+from bench_sim.pipeline import PassResult, physical_coords, run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
 from bench_sim.runtime.execution import Shared, open_client, release_client, run_tasks
@@ -78,9 +78,6 @@ from bench_sim.workflows.dataset.store import (
 from bench_sim.workflows.dataset.targets import fixed_camera, recorded_values
 from bench_sim.workflows.dataset.writer import DatasetFolder, SampleWriter
 from bench_sim.workflows.preflight import preflight_tasks
-
-if TYPE_CHECKING:
-    import xarray as xr
 
 __all__ = [
     "SampleTask",
@@ -135,8 +132,10 @@ class SampleOutput:
     info: dict[str, Any]
 
 
-def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
-    """Summary metrics of one simulation (the manifest's columns).
+def sample_metrics(sim: PassResult, cfg: BenchConfig) -> dict[str, float]:
+    """Summary metrics of one simulation ``sim`` (the manifest's columns), from its arrays and
+    attributes (:meth:`~bench_sim.pipeline.PassResult.read`, :attr:`~bench_sim.pipeline.PassResult.attrs`:
+    no dataset is built, xarray is not imported).
 
     ``scene_dr_db`` (:func:`~bench_sim.metrics.truth.scene_dynamic_range_db` of the photons of
     the lowest stored stage) and, per stored stage ``m``: ``saturated_fraction_m{m}``,
@@ -148,20 +147,21 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
     ``|r - 1|`` above :data:`~bench_sim.metrics.fusion_truth.LIGHT_RATIO_TOLERANCE`: 0 where eq. 11's
     assumption holds everywhere), and ``recoverable_fraction`` (``hdr_recoverable``).
     """
-    photons0 = np.asarray(ds.photons.values[0])
+    read = sim.read
+    photons0 = np.asarray(read("photons", sim.stages[0]))
     dark, bright = region_masks(photons0)
     out = {"scene_dr_db": scene_dynamic_range_db(photons0)}
-    t_int, ped = float(ds.attrs["t_int_s"]), float(ds.attrs["pedestal_dn"])
-    for s, m in enumerate(int(v) for v in ds.stage.values):
-        dn, mean, clipped = ds.dn.values[s], ds.mean_dn.values[s], ds.clipped.values[s]
+    t_int, ped = float(sim.attrs["t_int_s"]), float(sim.attrs["pedestal_dn"])
+    for m in sim.stages:
+        dn, mean, clipped = read("dn", m), read("mean_dn", m), read("clipped", m)
         dark_level = float(stage_mean_var_dn(
             0.0, cfg.sensor, t_int, m, subtract_black=cfg.dtdi.subtract_black, pedestal_dn=ped
         )[0])
         out[f"saturated_fraction_m{m}"] = saturated_fraction(clipped)
         out[f"snr_dark_m{m}"] = truth_snr(dn, mean, dark_level, dark & ~clipped)
         out[f"snr_bright_m{m}"] = truth_snr(dn, mean, dark_level, bright & ~clipped)
-    if "tdi_light_ratio" in ds:
-        r = np.asarray(ds.tdi_light_ratio.values, dtype=np.float64)
+    if "tdi_light_ratio" in sim.variables:
+        r = np.asarray(read("tdi_light_ratio", None), dtype=np.float64)
         r = r[np.isfinite(r)]
         dev = np.abs(r - 1.0)
         p01, p99 = np.percentile(r, [1.0, 99.0]) if r.size else (np.nan, np.nan)
@@ -169,7 +169,7 @@ def sample_metrics(ds: xr.Dataset, cfg: BenchConfig) -> dict[str, float]:
             light_ratio_p01=float(p01), light_ratio_p99=float(p99),
             light_ratio_max_dev=float(dev.max()) if r.size else float("nan"),
             light_ratio_outside_fraction=float(np.mean(dev > LIGHT_RATIO_TOLERANCE)) if r.size else 0.0,
-            recoverable_fraction=float(np.mean(ds.hdr_recoverable.values)),
+            recoverable_fraction=float(np.mean(read("hdr_recoverable", None))),
         )
     return out
 
@@ -185,7 +185,8 @@ def sample_inputs(tasks: Sequence[SampleTask]) -> list[tuple[Shared, ...]]:
 
 
 def make_sample(task: SampleTask, records: LightRecords | None = None) -> SampleOutput:
-    """Make one sample (runs in a worker): one pass with truth, its arrays and metrics.
+    """Make one sample (runs in a worker): one pass with truth, its arrays and metrics (read
+    off the pass's arrays: the worker never imports xarray).
 
     ``records``: the light records of its scene made by another task (:func:`sample_inputs`),
     put in this process's cache for the pass; without them the pass finds them in the cache or
@@ -203,18 +204,17 @@ def make_sample(task: SampleTask, records: LightRecords | None = None) -> Sample
         cfg = scale_lights(cfg, scale)
     camera = None if task.camera_seed is None else fixed_camera(cfg, task.camera_seed)
     res = run_pass(cfg, task.stages, np.random.default_rng(task.stream), truth=True, fixed_pattern=camera)
-    ds = res.dataset
-    arrays = {v: np.asarray(ds[v].values) for v in (*STAGE_VARIABLES, *FUSED_VARIABLES) if v in ds}
+    arrays = {v: res.values(v) for v in (*STAGE_VARIABLES, *FUSED_VARIABLES) if v in res.variables}
     across = task.scene.get("window_across_mm", 0.0) * 1e-3
     arrays.update({k: values for k, (_d, values, _a) in physical_coords(cfg, across_m=across).items()})
     info: dict[str, Any] = {
         "config_sha256": config_sha256(cfg),
-        **{k: ds.attrs[k] for k in ("engine", "variant", "t_int_s", "frames")},
+        **{k: res.attrs[k] for k in ("engine", "variant", "t_int_s", "frames")},
         "timings_s": {k: round(float(v), 4) for k, v in res.timings_s.items()},
     }
     if task.scene:
         info["scene"] = SampleScene(dict(task.scene), scale).as_record()
-    return SampleOutput(task.index, arrays, sample_metrics(ds, cfg), info)
+    return SampleOutput(task.index, arrays, sample_metrics(res, cfg), info)
 
 
 # --- the run -------------------------------------------------------------------------------------

@@ -41,6 +41,7 @@ from bench_sim.config import BenchConfig
 from bench_sim.io import write_csv
 from bench_sim.metrics.banding import FlatBanding, flat_banding
 from bench_sim.metrics.flicker_theory import predicted_banding
+from bench_sim.pipeline import Read
 from bench_sim.rig.geometry import rig_geometry
 from bench_sim.rig.lights import flicker_fundamental
 
@@ -65,12 +66,13 @@ def flat_half_lines(cfg: BenchConfig, stage: int) -> int:
     return 1 + math.ceil(abs(float(cfg.timing.sync_error)) * (int(stage) - 1) - 1e-9)
 
 
-def stage_banding(cfg: BenchConfig, ds: Any, stage: int, cycles_per_line: float) -> FlatBanding:
+def stage_banding(cfg: BenchConfig, read: Read, stage: int, cycles_per_line: float) -> FlatBanding:
     """The banding of stage ``m``'s noise-free truth ``photons`` against its ``reflectance``
-    (:func:`bench_sim.metrics.banding.flat_banding`): the estimator without the target's floor."""
+    (:func:`bench_sim.metrics.banding.flat_banding`): the estimator without the target's floor.
+    ``read``: the pass's variables (:meth:`bench_sim.pipeline.PassResult.read`)."""
     return flat_banding(
-        ds["photons"].sel(stage=stage).values, ds["reflectance"].sel(stage=stage).values,
-        cycles_per_line, half_lines=flat_half_lines(cfg, stage),
+        read("photons", stage), read("reflectance", stage), cycles_per_line,
+        half_lines=flat_half_lines(cfg, stage),
     )
 
 
@@ -86,11 +88,11 @@ def _prediction(cfg: BenchConfig, name: str, m: int) -> tuple[float, complex]:
     return nu, amp * cmath.exp(1j * phase)
 
 
-def _hdr_prediction(cfg: BenchConfig, name: str, ds: Any, fused: Any) -> complex:
+def _hdr_prediction(cfg: BenchConfig, name: str, read: Read, fused: Any) -> complex:
     """The fused image's phasor: ``sum_s q_s P_s`` over the source stages, ``q_s`` the share of
     the profile's mean made by the pixels taken from stage ``s``."""
     mu1, mu2 = cfg.fusion.mu1, cfg.fusion.mu2
-    refl = np.asarray(ds["reflectance"].sel(stage=mu2).values, dtype=np.float64)
+    refl = np.asarray(read("reflectance", mu2), dtype=np.float64)
     hdr = np.asarray(fused.hdr, dtype=np.float64)
     part = np.divide(hdr, refl, out=np.zeros(hdr.shape), where=refl > 0)
     total = float(part.sum())
@@ -101,10 +103,10 @@ def _hdr_prediction(cfg: BenchConfig, name: str, ds: Any, fused: Any) -> complex
 
 
 def banding_rows(
-    point: int, cfg: BenchConfig, stages: Sequence[int], ds: Any, fused: Any
+    point: int, cfg: BenchConfig, stages: Sequence[int], read: Read, fused: Any
 ) -> list[dict[str, Any]]:
-    """The rows of ``points_images.csv`` of one point (module docstring). ``ds``: the pass's
-    dataset with its truth; ``fused``: its eq. 11 fusion
+    """The rows of ``points_images.csv`` of one point (module docstring). ``read``: the pass's
+    variables with its truth (:meth:`bench_sim.pipeline.PassResult.read`); ``fused``: its eq. 11 fusion
     (:class:`~bench_sim.fusion.common.FusionResult`)."""
     rows: list[dict[str, Any]] = []
     emitting = [n for n, light in cfg.lights.items() if light.emits]
@@ -116,16 +118,15 @@ def banding_rows(
                 "alone": len(emitting) == 1}
         for m in stages:
             nu, pred = _prediction(cfg, name, m)
-            fb = stage_banding(cfg, ds, m, nu)
+            fb = stage_banding(cfg, read, m, nu)
             rows.append({**base, "image": f"stage_{m:03d}", "stage": m, "cycles_per_line": nu,
                          "amplitude": fb.amplitude, "phase_rad": fb.phase_rad, "amplitude_sd": fb.sd,
                          "predicted_amplitude": abs(pred), "predicted_phase_rad": cmath.phase(pred)})
         mu2 = cfg.fusion.mu2
         nu = _prediction(cfg, name, mu2)[0]
         hdr = np.where(np.asarray(fused.saturated), np.nan, np.asarray(fused.hdr, dtype=np.float64))
-        fb = flat_banding(hdr, ds["reflectance"].sel(stage=mu2).values, nu,
-                          half_lines=flat_half_lines(cfg, mu2))
-        pred = _hdr_prediction(cfg, name, ds, fused)
+        fb = flat_banding(hdr, read("reflectance", mu2), nu, half_lines=flat_half_lines(cfg, mu2))
+        pred = _hdr_prediction(cfg, name, read, fused)
         rows.append({**base, "image": "gamma_hdr", "stage": mu2, "cycles_per_line": nu,
                      "amplitude": fb.amplitude, "phase_rad": fb.phase_rad, "amplitude_sd": fb.sd,
                      "predicted_amplitude": abs(pred), "predicted_phase_rad": cmath.phase(pred)})

@@ -30,9 +30,9 @@ from bench_sim.io.strict_json import strict_json
 from bench_sim.measure.chain_dr import measure_chain_dynamic_range
 from bench_sim.measure.fusion_scores import fusion_scores
 from bench_sim.measure.pass_metrics import pass_metrics
-from bench_sim.measure.sharpness import add_sharpness, has_slanted_edges
+from bench_sim.measure.sharpness import has_slanted_edges, pass_sharpness
 from bench_sim.metrics.banding import folded_cycles_per_line
-from bench_sim.pipeline import run_pass
+from bench_sim.pipeline import PassResult, Read, run_pass
 from bench_sim.render.exposures import fast_records, records_group
 from bench_sim.render.records import LightRecords, install_records
 from bench_sim.runtime.execution import Shared, task_seed_sequence, worker_cache
@@ -157,9 +157,9 @@ def _truth_columns(summary: dict[str, Any]) -> dict[str, Any]:
     return rec
 
 
-def _banding_columns(task: PointTask, ds: Any) -> dict[str, float]:
-    """Flicker banding of each flickering light at each stage of the pass (NaN where it does
-    not flicker or emit at this point)."""
+def _banding_columns(task: PointTask, read: Read) -> dict[str, float]:
+    """Flicker banding of each flickering light at each stage of the pass (its variables read by
+    ``read``; NaN where it does not flicker or emit at this point)."""
     cfg = task.cfg
     rec: dict[str, float] = {}
     for name in task.flicker_lights:
@@ -168,25 +168,26 @@ def _banding_columns(task: PointTask, ds: Any) -> dict[str, float]:
         for m in task.stages:
             amp = float("nan")
             if light.flickers and light.emits:
-                amp = stage_banding(cfg, ds, m, nu).amplitude  # on the flat-target pixels: no target floor
+                amp = stage_banding(cfg, read, m, nu).amplitude  # on the flat-target pixels: no target floor
             rec[banding_column(name, m)] = amp
     return rec
 
 
-def _sharpness_columns(cfg: BenchConfig, ds: Any) -> dict[str, float | None]:
+def _sharpness_columns(cfg: BenchConfig, sim: PassResult) -> dict[str, float | None]:
     """MTF50 along and across the track of Gamma1, Gamma2 and Gamma_HDR from the target's
-    slanted edges (:mod:`bench_sim.measure.sharpness`); empty (``None``) without them."""
+    slanted edges of the pass ``sim`` (:func:`bench_sim.measure.sharpness.pass_sharpness` on its
+    arrays); empty (``None``) without them."""
     rec: dict[str, float | None] = {f"mtf50_{d}_{n}": None for d in ("along", "across") for n in IMAGES}
     if not has_slanted_edges(cfg):
         return rec
-    sharp = add_sharpness(ds, cfg)
+    sharp = pass_sharpness(sim.read, sim.stages, sim.variables, cfg)
+    if sharp is None:  # no whole square in view
+        return rec
     for d in ("along", "across"):
-        if f"mtf50_{d}" not in sharp:  # no whole square in view
-            continue
         for name, m in (("gamma1", cfg.fusion.mu1), ("gamma2", cfg.fusion.mu2)):
-            rec[f"mtf50_{d}_{name}"] = float(sharp[f"mtf50_{d}"].sel(stage=m))
-        if f"gamma_hdr_mtf50_{d}" in sharp:
-            rec[f"mtf50_{d}_gamma_hdr"] = float(sharp[f"gamma_hdr_mtf50_{d}"])
+            rec[f"mtf50_{d}_{name}"] = float(sharp.per_stage[sharp.stages.index(m)][d].mtf50_cyc_px)
+        if sharp.hdr is not None:
+            rec[f"mtf50_{d}_gamma_hdr"] = float(sharp.hdr[d].mtf50_cyc_px)
     return {k: (None if v is not None and math.isnan(v) else v) for k, v in rec.items()}
 
 
@@ -219,13 +220,13 @@ def measure_point(task: PointTask, *inputs: Any) -> dict[str, Any]:
     if lights.strong.emits and lights.weak.emits:
         rec["spot_fill_ratio"] = lights.strong.irradiance_w_m2 / lights.weak.irradiance_w_m2
     rec.update(_truth_columns(fusion_scores(cfg, sim, fused).summary))
-    rec.update(_banding_columns(task, sim.dataset))
-    rec.update(_sharpness_columns(cfg, sim.dataset))
+    rec.update(_banding_columns(task, sim.read))
+    rec.update(_sharpness_columns(cfg, sim))
     if task.ratio is not None:
         rec["light_ratio"] = light_ratio(cfg, task.ratio)
     # the long table points_images.csv: every listed stage and gamma_hdr, with the closed form
     stages = tuple(sorted({*task.banding_stages, mu1, mu2}))
-    rec["banding_images"] = banding_rows(task.index, cfg, stages, sim.dataset, fused)
-    if task.images_dir is not None:
+    rec["banding_images"] = banding_rows(task.index, cfg, stages, sim.read, fused)
+    if task.images_dir is not None:  # the one step that builds the pass's dataset (xarray)
         write_point_images(task.images_dir, task.index, sim.dataset)
     return rec
