@@ -68,12 +68,13 @@ def _moments(
     ca, cb = normal_cdf(a), normal_cdf(b)
     m0 = cb - ca
     var = safe * safe  # (what ``safe**2`` computes)
+    lo2, hi2, above = lo_a**2, hi_a**2, 1.0 - cb  # (``x**2`` is ``x * x``, ``x**1`` is ``x``)
     m1 = mu * m0 - safe * (pb - pa)
     m2 = mu * m1 + var * m0 - safe * (hi_a * pb - lo_a * pa)
-    m3 = mu * m2 + 2.0 * var * m1 - safe * (hi_a**2 * pb - lo_a**2 * pa)
+    m3 = mu * m2 + 2.0 * var * m1 - safe * (hi2 * pb - lo2 * pa)
     out = []
-    for k, mk in ((1, m1), (2, m2), (3, m3)):
-        val = mk + lo_a**k * ca + hi_a**k * (1.0 - cb)
+    for k, mk, lo_k, hi_k in ((1, m1, lo_a, hi_a), (2, m2, lo2, hi2), (3, m3, lo_a**3, hi_a**3)):
+        val = mk + lo_k * ca + hi_k * above
         out.append(np.asarray(val) if positive else np.where(sd_a > 0, val, np.clip(mu, lo_a, hi_a) ** k))
     return out[0], out[1], out[2], m0
 

@@ -234,9 +234,9 @@ def _integrate_reads(
     q = PoissonQuantile.of(lam)
     q_lo, q_hi = (q.at(np.full(1, z)) for z in (-_Z_MAX, _Z_MAX))
     cuts = [z_at(t, q, q_lo, q_hi) for t in targets]
-    fixed = [np.full(lam.shape, z) for z in (-_Z_MAX, -_Z_SPLIT, _Z_SPLIT, _Z_MAX)]
-    edges = np.sort(np.stack([*fixed, *cuts]), axis=0)
-    return quadrature(edges, q, det_e, off, (k, fw, s), lo, hi, r)
+    fixed = (-_Z_MAX, -_Z_SPLIT, _Z_SPLIT, _Z_MAX)
+    edges = np.sort(np.stack([*(np.full(lam.shape, z) for z in fixed), *cuts]), axis=0)
+    return quadrature(edges, q, det_e, off, (k, fw, s), lo, hi, r, shared=fixed)
 
 
 def read_cumulants(
