@@ -58,8 +58,8 @@ def _moments(
     ``(lo, hi)`` (``sd = 1`` where ``sd = 0``). A scalar ``sd > 0`` skips the ``clip(mu)`` branch
     (what ``np.where`` would not pick)."""
     mu = np.asarray(mu, dtype=np.float64)
-    lo_a = np.broadcast_to(np.asarray(lo, dtype=np.float64), mu.shape)
-    hi_a = np.broadcast_to(np.asarray(hi, dtype=np.float64), mu.shape)
+    lo_c, hi_c = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    lo_a, hi_a = np.broadcast_to(lo_c, mu.shape), np.broadcast_to(hi_c, mu.shape)
     sd_a = np.broadcast_to(np.asarray(sd, dtype=np.float64), mu.shape)
     positive = np.ndim(sd) == 0 and float(sd) > 0
     safe = np.float64(sd) if positive else np.where(sd_a > 0, sd_a, 1.0)
@@ -68,12 +68,13 @@ def _moments(
     ca, cb = normal_cdf(a), normal_cdf(b)
     m0 = cb - ca
     var = safe * safe  # (what ``safe**2`` computes)
-    lo2, hi2, above = lo_a**2, hi_a**2, 1.0 - cb  # (``x**2`` is ``x * x``, ``x**1`` is ``x``)
+    # powers of the clips as given (a column: once per read), broadcast in the products
+    lo2, hi2, above = lo_c**2, hi_c**2, 1.0 - cb  # (``x**2`` is ``x * x``, ``x**1`` is ``x``)
     m1 = mu * m0 - safe * (pb - pa)
     m2 = mu * m1 + var * m0 - safe * (hi_a * pb - lo_a * pa)
     m3 = mu * m2 + 2.0 * var * m1 - safe * (hi2 * pb - lo2 * pa)
     out = []
-    for k, mk, lo_k, hi_k in ((1, m1, lo_a, hi_a), (2, m2, lo2, hi2), (3, m3, lo_a**3, hi_a**3)):
+    for k, mk, lo_k, hi_k in ((1, m1, lo_a, hi_a), (2, m2, lo2, hi2), (3, m3, lo_c**3, hi_c**3)):
         val = mk + lo_k * ca + hi_k * above
         out.append(np.asarray(val) if positive else np.where(sd_a > 0, val, np.clip(mu, lo_a, hi_a) ** k))
     return out[0], out[1], out[2], m0
