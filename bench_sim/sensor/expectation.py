@@ -20,11 +20,12 @@ normal ``z`` (the distribution the ``hybrid`` sampler draws, :func:`bench_sim.se
 shot_electrons`), the read noise is integrated in closed form (moments of a two-sided clipped
 normal), and ``z`` by 12-node Gauss-Legendre quadrature on ``[-6.5, 6.5]`` split at the kinks (where the
 electrons reach the full well and where the mean reaches ``0`` and ``T``), so every piece is
-smooth; below :data:`~bench_sim.sensor.sampler.SHOT_NOISE_SWITCH_E` mean electrons (where the
-sampler draws the exact Poisson law and the quantile is no longer close to it) ``n`` is summed
-over its counts with the Poisson weights instead. Rounding (``rint``) is unbiased there (the
-read's spread covers many DN); it adds ``1/12`` DN^2 to the variance with the probability that the
-read is not pinned to a clip.
+smooth (:mod:`bench_sim.sensor.read_quadrature`); below
+:data:`~bench_sim.sensor.sampler.SHOT_NOISE_SWITCH_E` mean electrons (where the sampler draws
+the exact Poisson law and the quantile is no longer close to it) ``n`` is summed over its counts
+with the Poisson weights instead. Rounding (``rint``) is unbiased there (the read's spread covers
+many DN); it adds ``1/12`` DN^2 to the variance with the probability that the read is not pinned
+to a clip.
 
 Per stage (:func:`clipped_sum_mean`): the sum of ``m`` independent reads has the summed
 cumulants; its clip at ``0`` and ``W`` is taken through the one-term Edgeworth expansion with
