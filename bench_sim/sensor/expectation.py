@@ -57,7 +57,7 @@ from bench_sim.sensor.clipped_normal import normal_pdf as _phi
 from bench_sim.sensor.cumulant_kernel import linear_cumulants
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2
 from bench_sim.sensor.read_quadrature import Z_MAX as _Z_MAX
-from bench_sim.sensor.read_quadrature import PoissonQuantile, quadrature, z_at
+from bench_sim.sensor.read_quadrature import Moments, PoissonQuantile, quadrature, z_at
 from bench_sim.sensor.sampler import SHOT_NOISE_SWITCH_E
 
 #: A monotone response of the charge, electrons -> electrons
@@ -156,8 +156,6 @@ def _electrons_at(response: Response, target: np.ndarray, fw: float) -> np.ndarr
     return 0.5 * (lo + hi)
 
 
-#: raw moments of reads and the probability that each is inside its clips
-Moments = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 #: counts of the exact Poisson sum: P(N > this) < 1e-20 for every mean below the switch
 _POISSON_COUNTS = np.arange(int(SHOT_NOISE_SWITCH_E + 12.0 * np.sqrt(SHOT_NOISE_SWITCH_E) + 13.0),
                             dtype=np.float64)

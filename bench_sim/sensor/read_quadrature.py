@@ -24,7 +24,7 @@ import numpy as np
 from bench_sim.sensor.clipped_normal import clipped_read_moments
 from bench_sim.sensor.clipped_normal import normal_pdf as _phi
 
-__all__ = ["PoissonQuantile", "z_at", "quadrature", "Z_MAX", "NODES"]
+__all__ = ["PoissonQuantile", "z_at", "quadrature", "Moments", "Z_MAX", "NODES"]
 
 #: Gauss-Legendre nodes per smooth piece of the ``z`` integral.
 NODES = 12
