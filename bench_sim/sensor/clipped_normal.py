@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-__all__ = ["normal_pdf", "normal_cdf", "clipped_normal_moments", "inside_probability"]
+__all__ = ["normal_pdf", "normal_cdf", "clipped_normal_moments", "clipped_read_moments", "inside_probability"]
 
 
 def normal_pdf(x: np.ndarray) -> np.ndarray:
@@ -35,26 +35,54 @@ def clipped_normal_moments(
     (``alpha, beta`` the standardised bounds), plus the point masses at the bounds. ``sd = 0``
     gives ``clip(mu)``.
     """
+    m1, m2, m3, _ = _moments(mu, sd, lo, hi)
+    return m1, m2, m3
+
+
+def clipped_read_moments(
+    mu: np.ndarray, sd: float, lo: np.ndarray | float, hi: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`clipped_normal_moments` and :func:`inside_probability` of the same reads in one pass.
+
+    For ``sd > 0`` the inside probability is the normal's mass ``Phi(beta) - Phi(alpha)`` that
+    the moments' recursion starts from (the same numbers, not evaluated twice).
+    """
+    m1, m2, m3, m0 = _moments(mu, sd, lo, hi)
+    return m1, m2, m3, (m0 if sd > 0 else inside_probability(mu, sd, lo, hi))
+
+
+def _moments(
+    mu: np.ndarray, sd: np.ndarray | float, lo: np.ndarray | float, hi: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The raw moments of :func:`clipped_normal_moments` and the normal's mass ``M_0`` inside
+    ``(lo, hi)`` (``sd = 1`` where ``sd = 0``). A scalar ``sd > 0`` skips the ``clip(mu)`` branch
+    (what ``np.where`` would not pick)."""
     mu = np.asarray(mu, dtype=np.float64)
+    lo_c, hi_c = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    lo_a, hi_a = np.broadcast_to(lo_c, mu.shape), np.broadcast_to(hi_c, mu.shape)
     sd_a = np.broadcast_to(np.asarray(sd, dtype=np.float64), mu.shape)
-    lo_a = np.broadcast_to(np.asarray(lo, dtype=np.float64), mu.shape)
-    hi_a = np.broadcast_to(np.asarray(hi, dtype=np.float64), mu.shape)
-    safe = np.where(sd_a > 0, sd_a, 1.0)
+    positive = np.ndim(sd) == 0 and float(sd) > 0
+    safe = np.float64(sd) if positive else np.where(sd_a > 0, sd_a, 1.0)
     a, b = (lo_a - mu) / safe, (hi_a - mu) / safe
     pa, pb = normal_pdf(a), normal_pdf(b)
     ca, cb = normal_cdf(a), normal_cdf(b)
     m0 = cb - ca
+    var = safe * safe  # (what ``safe**2`` computes)
+    # powers of the clips as given (a column: once per read), broadcast in the products
+    lo2, hi2, above = lo_c**2, hi_c**2, 1.0 - cb  # (``x**2`` is ``x * x``, ``x**1`` is ``x``)
     m1 = mu * m0 - safe * (pb - pa)
-    m2 = mu * m1 + safe**2 * m0 - safe * (hi_a * pb - lo_a * pa)
-    m3 = mu * m2 + 2.0 * safe**2 * m1 - safe * (hi_a**2 * pb - lo_a**2 * pa)
+    m2 = mu * m1 + var * m0 - safe * (hi_a * pb - lo_a * pa)
+    m3 = mu * m2 + 2.0 * var * m1 - safe * (hi2 * pb - lo2 * pa)
     out = []
-    for k, mk in ((1, m1), (2, m2), (3, m3)):
-        val = mk + lo_a**k * ca + hi_a**k * (1.0 - cb)
-        out.append(np.where(sd_a > 0, val, np.clip(mu, lo_a, hi_a) ** k))
-    return out[0], out[1], out[2]
+    for k, mk, lo_k, hi_k in ((1, m1, lo_a, hi_a), (2, m2, lo2, hi2), (3, m3, lo_c**3, hi_c**3)):
+        val = mk + lo_k * ca + hi_k * above
+        out.append(np.asarray(val) if positive else np.where(sd_a > 0, val, np.clip(mu, lo_a, hi_a) ** k))
+    return out[0], out[1], out[2], m0
 
 
-def inside_probability(mu: np.ndarray, sd: float, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def inside_probability(
+    mu: np.ndarray, sd: float, lo: np.ndarray | float, hi: np.ndarray | float
+) -> np.ndarray:
     """``P(lo < Y < hi)``, ``Y ~ N(mu, sd^2)``: where a rounded read is not pinned to a clip (the
     rounding's ``1/12`` DN^2 counts with this probability; a pinned read does not vary)."""
     if sd <= 0:

@@ -20,11 +20,12 @@ normal ``z`` (the distribution the ``hybrid`` sampler draws, :func:`bench_sim.se
 shot_electrons`), the read noise is integrated in closed form (moments of a two-sided clipped
 normal), and ``z`` by 12-node Gauss-Legendre quadrature on ``[-6.5, 6.5]`` split at the kinks (where the
 electrons reach the full well and where the mean reaches ``0`` and ``T``), so every piece is
-smooth; below :data:`~bench_sim.sensor.sampler.SHOT_NOISE_SWITCH_E` mean electrons (where the
-sampler draws the exact Poisson law and the quantile is no longer close to it) ``n`` is summed
-over its counts with the Poisson weights instead. Rounding (``rint``) is unbiased there (the
-read's spread covers many DN); it adds ``1/12`` DN^2 to the variance with the probability that the
-read is not pinned to a clip.
+smooth (:mod:`bench_sim.sensor.read_quadrature`); below
+:data:`~bench_sim.sensor.sampler.SHOT_NOISE_SWITCH_E` mean electrons (where the sampler draws
+the exact Poisson law and the quantile is no longer close to it) ``n`` is summed over its counts
+with the Poisson weights instead. Rounding (``rint``) is unbiased there (the read's spread covers
+many DN); it adds ``1/12`` DN^2 to the variance with the probability that the read is not pinned
+to a clip.
 
 Per stage (:func:`clipped_sum_mean`): the sum of ``m`` independent reads has the summed
 cumulants; its clip at ``0`` and ``W`` is taken through the one-term Edgeworth expansion with
@@ -50,12 +51,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench_sim.sensor.clipped_normal import clipped_normal_moments
-from bench_sim.sensor.clipped_normal import inside_probability as _inside
+from bench_sim.sensor.clipped_normal import clipped_normal_moments, clipped_read_moments
 from bench_sim.sensor.clipped_normal import normal_cdf as _cdf
 from bench_sim.sensor.clipped_normal import normal_pdf as _phi
 from bench_sim.sensor.cumulant_kernel import linear_cumulants
 from bench_sim.sensor.model import QUANTIZATION_VAR_DN2
+from bench_sim.sensor.read_quadrature import Z_MAX as _Z_MAX
+from bench_sim.sensor.read_quadrature import Moments, PoissonQuantile, quadrature, z_at
 from bench_sim.sensor.sampler import SHOT_NOISE_SWITCH_E
 
 #: A monotone response of the charge, electrons -> electrons
@@ -81,12 +83,8 @@ _FAR_CLIP_SDS = 9.0
 #: Read noise [DN] below which a read's clips are split points of the quadrature through a
 #: response (above it the clipped normal's moments are smooth in its mean)
 _KINK_SD_DN = 0.5
-#: Gauss-Legendre nodes per smooth piece of the ``z`` integral.
-_NODES = 12
-_Z_MAX = 6.5
 #: fixed split points of the ``z`` range (the normal's shoulders)
 _Z_SPLIT = 2.5
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(_NODES)
 #: standard deviations from both clips beyond which a clipped sum's mean is its mean ``k1`` in
 #: float64: both shortfalls are below ``4 phi(12) sd ~ 2e-31 sd`` (``1 - Phi(12)`` rounds to 0),
 #: far below half an ulp of ``k1`` (``|k1| >= sd``), so ``k1 + lower - upper`` rounds to ``k1``
@@ -126,46 +124,20 @@ class ReadModel:
         )
 
 
-def _cf_quantile(z: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """Cornish-Fisher quantile of Poisson(lam) (cumulants all ``lam``), third order."""
-    s = np.sqrt(np.maximum(lam, 1e-300))
-    g1, g2 = 1.0 / s, 1.0 / np.maximum(lam, 1e-300)
-    return lam + s * (z + g1 * (z * z - 1) / 6 + g2 * (z**3 - 3 * z) / 24 - g1 * g1 * (2 * z**3 - 5 * z) / 36)
-
-
-def _z_at(target: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """``z`` where :func:`_cf_quantile` reaches ``target`` (bisection; clipped to the quadrature's range)."""
-    out = np.full(lam.shape, _Z_MAX)  # the quantile stays below the target over the whole range
-    out[_cf_quantile(np.full(lam.shape, -_Z_MAX), lam) >= target] = -_Z_MAX  # or above it
-    inside = _cf_quantile(np.full(lam.shape, _Z_MAX), lam) >= target
-    inside &= out > 0
-    lam_in, target_in = lam[inside], np.broadcast_to(target, lam.shape)[inside]
-    lo = np.full(lam_in.shape, -_Z_MAX)
-    hi = np.full(lam_in.shape, _Z_MAX)
-    for _ in range(24):
-        mid = 0.5 * (lo + hi)
-        below = _cf_quantile(mid, lam_in) < target_in
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-    out[inside] = 0.5 * (lo + hi)
-    return out
-
-
 def _full_read_moments(
     mu: np.ndarray, sd: float, lo: np.ndarray, hi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Raw moments of full-well reads ``clip(N(mu, sd^2), lo, hi)`` and :func:`_inside`: the
+    """Raw moments of full-well reads ``clip(N(mu, sd^2), lo, hi)`` and the probability that
+    each is inside its clips (:func:`~bench_sim.sensor.clipped_normal.inside_probability`): the
     normal's own (``mu``, ``mu^2 + sd^2``, ``mu^3 + 3 mu sd^2``, 1) where both clips lie more than
     :data:`_FAR_CLIP_SDS` sd away (the clipped tails are below float64's resolution there), else
-    :func:`clipped_normal_moments`."""
+    :func:`~bench_sim.sensor.clipped_normal.clipped_read_moments`."""
     far = (hi - mu > _FAR_CLIP_SDS * sd) & (mu - lo > _FAR_CLIP_SDS * sd)
     var = sd * sd
     m1, m2, m3, p_in = mu.copy(), mu * mu + var, mu * (mu * mu + 3.0 * var), np.ones(mu.shape)
     if not np.all(far):
         near = ~far
-        c1, c2, c3 = clipped_normal_moments(mu[near], sd, lo[near], hi[near])
-        m1[near], m2[near], m3[near] = c1, c2, c3
-        p_in[near] = _inside(mu[near], sd, lo[near], hi[near])
+        m1[near], m2[near], m3[near], p_in[near] = clipped_read_moments(mu[near], sd, lo[near], hi[near])
     return m1, m2, m3, p_in
 
 
@@ -184,8 +156,6 @@ def _electrons_at(response: Response, target: np.ndarray, fw: float) -> np.ndarr
     return 0.5 * (lo + hi)
 
 
-#: raw moments of reads and the probability that each is inside its clips
-Moments = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 #: counts of the exact Poisson sum: P(N > this) < 1e-20 for every mean below the switch
 _POISSON_COUNTS = np.arange(int(SHOT_NOISE_SWITCH_E + 12.0 * np.sqrt(SHOT_NOISE_SWITCH_E) + 13.0),
                             dtype=np.float64)
@@ -220,7 +190,7 @@ def _poisson_reads(lam: np.ndarray, det_e: np.ndarray, off: np.ndarray, rm: Read
         w = poisson.pmf(_POISSON_COUNTS[None, :], lam[p, None])
         mu = k * r(np.minimum(_POISSON_COUNTS[None, :] + det_e[p, None], fw)) + off[p, None]
         lo_p, hi_p = lo[p, None], hi[p, None]
-        mom = (*clipped_normal_moments(mu, s, lo_p, hi_p), _inside(mu, s, lo_p, hi_p))
+        mom = clipped_read_moments(mu, s, lo_p, hi_p)
         total = w.sum(axis=1)
         for j in range(4):
             out[j][p] = (w * mom[j]).sum(axis=1) / total
@@ -232,17 +202,18 @@ def _integrate_reads(
     noisy: bool, response: Response | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Raw moments of the clipped reads ``lam`` (1-D arrays) and the probability that a read is
-    inside its clips (:func:`_inside`), by quadrature over ``z``; with a monotone ``response`` of
-    the charge (after the full-well clip, before the read noise)."""
+    inside its clips, by quadrature over ``z``
+    (:func:`~bench_sim.sensor.read_quadrature.quadrature`); with a monotone ``response`` of the
+    charge (after the full-well clip, before the read noise)."""
     k, fw, s = rm.gain_dn_per_e, rm.full_well_e, rm.gain_dn_per_e * rm.read_noise_e
     r = _identity if response is None else response
     if not noisy or not np.any(lam > 0):
         mu = k * r(np.minimum(lam + det_e, fw)) + off
-        return (*clipped_normal_moments(mu, s, lo, hi), _inside(mu, s, lo, hi))
+        return clipped_read_moments(mu, s, lo, hi)
     # reads full at every node (the quantile at -_Z_MAX already reaches the full well; it rises
     # with z where lam is that large): the integrand is constant, the read a clipped normal
     full = lam + det_e >= fw  # (the quantile at -_Z_MAX lies below lam)
-    lowest = _cf_quantile(np.full(int(full.sum()), -_Z_MAX), lam[full])
+    lowest = PoissonQuantile.of(lam[full]).at(np.full(1, -_Z_MAX))
     full[full] = np.maximum(lowest, 0.0) + det_e[full] >= fw
     # small means: the exact Poisson law (what the hybrid sampler draws there; the quantile is not)
     small = ~full & (lam < SHOT_NOISE_SWITCH_E)
@@ -254,27 +225,17 @@ def _integrate_reads(
                                       response) if np.any(rest) else (np.empty(0),) * 4
             return _merge(part, m_part, m_rest)
     # kinks in z: full well, mean at lo and at hi
-    cuts = [_z_at(fw - det_e, lam)]
+    targets = [fw - det_e]
     if response is None:  # the charge where the mean reaches each clip: a kink without read noise
-        cuts += [_z_at((lo - off) / k - det_e, lam), _z_at((hi - off) / k - det_e, lam)]
+        targets += [(lo - off) / k - det_e, (hi - off) / k - det_e]
     elif s < _KINK_SD_DN:  # through a response, found by bisection (only where the kink is sharp)
-        cuts += [_z_at(_electrons_at(response, (b - off) / k, fw) - det_e, lam) for b in (lo, hi)]
-    fixed = [np.full(lam.shape, z) for z in (-_Z_MAX, -_Z_SPLIT, _Z_SPLIT, _Z_MAX)]
-    edges = np.sort(np.stack([*fixed, *cuts]), axis=0)
-    acc = [np.zeros(lam.shape) for _ in range(4)]
-    total = np.zeros(lam.shape)
-    for p in range(edges.shape[0] - 1):
-        a, b = edges[p], edges[p + 1]
-        half = 0.5 * (b - a)
-        z = (0.5 * (a + b))[:, None] + half[:, None] * _GL_X[None, :]
-        w = (half[:, None] * _GL_W[None, :]) * _phi(z)
-        e = np.minimum(np.maximum(_cf_quantile(z, lam[:, None]), 0.0) + det_e[:, None], fw)
-        mu, lo_n, hi_n = k * r(e) + off[:, None], lo[:, None], hi[:, None]
-        mom = (*clipped_normal_moments(mu, s, lo_n, hi_n), _inside(mu, s, lo_n, hi_n))
-        total += w.sum(axis=1)
-        for j in range(4):
-            acc[j] += (w * mom[j]).sum(axis=1)
-    return acc[0] / total, acc[1] / total, acc[2] / total, acc[3] / total
+        targets += [_electrons_at(response, (b - off) / k, fw) - det_e for b in (lo, hi)]
+    q = PoissonQuantile.of(lam)
+    q_lo, q_hi = (q.at(np.full(1, z)) for z in (-_Z_MAX, _Z_MAX))
+    cuts = [z_at(t, q, q_lo, q_hi) for t in targets]
+    fixed = (-_Z_MAX, -_Z_SPLIT, _Z_SPLIT, _Z_MAX)
+    edges = np.sort(np.stack([*(np.full(lam.shape, z) for z in fixed), *cuts]), axis=0)
+    return quadrature(edges, q, det_e, off, (k, fw, s), lo, hi, r, shared=fixed)
 
 
 def read_cumulants(
@@ -376,7 +337,7 @@ def _smooth_response_reads(
     if not np.any(ok):
         return
     lam_s, det_s, off_s = lam[ok][:, None], det[ok][:, None], off[ok][:, None]
-    if noisy:  # the Cornish-Fisher quantile (:func:`_cf_quantile`): lam + sqrt(lam) z + A + B / sqrt(lam)
+    if noisy:  # the Cornish-Fisher quantile (PoissonQuantile): lam + sqrt(lam) z + A + B / sqrt(lam)
         root = np.sqrt(lam_s)
         e = (lam_s + _GH_A) + root * _GH_X + _GH_B / root
     else:
