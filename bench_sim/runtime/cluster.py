@@ -203,26 +203,35 @@ def _prepare_worker() -> None:
     atexit.register(gc.freeze)
 
 
-#: what Dask's nannies put in a new worker's environment and a local cluster of bench_sim's leaves
-#: out (:func:`_workers_keep_glibc_thresholds`)
-DROPPED_WORKER_ENVIRON = ("MALLOC_TRIM_THRESHOLD_",)
+#: Dask settings a local cluster of bench_sim's starts its workers with (:func:`_worker_settings`)
+WORKER_SETTINGS: dict[str, Any] = {
+    # in the nannies' environment for a new worker process: nothing (a value set by the user is kept)
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+    "distributed.worker.profile.enabled": False,
+}
 
 
 @contextlib.contextmanager
-def _workers_keep_glibc_thresholds() -> Iterator[None]:
-    """Within the block, new worker processes start without Dask's ``MALLOC_TRIM_THRESHOLD_``
-    (``distributed.nanny.pre-spawn-environ``; a value the user set in the environment is kept).
+def _worker_settings() -> Iterator[None]:
+    """Within the block, new workers start with :data:`WORKER_SETTINGS`:
 
-    Any value of that variable turns off glibc's dynamic mmap threshold: every block of 128 KiB
-    or more is then mapped on its own and unmapped when freed, so each array a point makes is
-    paid again in page faults (a fault per 4 KiB page). A sweep point's warm pass took 0.76 s
-    with it and 0.40 s without (180,000 against 10,000 page faults), the time of a 6-point
-    sweep's two workers in the kernel 1.5 s each against 0.5 s; their peak resident memory grew
-    by 6-15 % (``docs/performance.md``). Dask sets it to give memory back to the system
-    sooner, which a worker that lives for one run does not need."""
+    - **Without Dask's** ``MALLOC_TRIM_THRESHOLD_`` (``distributed.nanny.pre-spawn-environ``; a
+      value the user set in the environment is kept). Any value of that variable turns off
+      glibc's dynamic mmap threshold: every block of 128 KiB or more is then mapped on its own
+      and unmapped when freed, so each array a point makes is paid again in page faults (a fault
+      per 4 KiB page). A sweep point's warm pass took 0.76 s with it and 0.40 s without (180,000
+      against 10,000 page faults), the time of a 6-point sweep's two workers in the kernel 1.5 s
+      each against 0.5 s; their peak resident memory grew by 6-15 % (``docs/performance.md``).
+      Dask sets it to give memory back to the system sooner, which a worker that lives for one
+      run does not need.
+    - **Without the statistical profiler** (``distributed.worker.profile.enabled``): a thread of
+      each worker walks the task's stack every 10 ms for the dashboard's profile page, which
+      bench_sim never shows; a 6-point ``--quick`` sweep took about 0.2 s less wall time and 0.3 s
+      less CPU without it.
+    """
     import dask
 
-    with dask.config.set({f"distributed.nanny.pre-spawn-environ.{k}": None for k in DROPPED_WORKER_ENVIRON}):
+    with dask.config.set(WORKER_SETTINGS):
         yield
 
 
@@ -243,7 +252,7 @@ def quiet_local_cluster(n_workers: int) -> Iterator[Any]:
             # Ctrl-C and SIGTERM held while the cluster starts (5-30 s under load) and delivered
             # when the start ends: here, where the cluster is closed again before they go on
             with deferred_interrupts():
-                with _sigint_blocked_for_new_workers(), _workers_keep_glibc_thresholds():
+                with _sigint_blocked_for_new_workers(), _worker_settings():
                     cluster = LocalCluster(
                         n_workers=n_workers,
                         threads_per_worker=1,

@@ -60,6 +60,23 @@ def test_a_bad_file_is_a_miss_and_is_removed(store, damage):
     assert kernel_store.load("k") is None and not path.exists()
 
 
+@pytest.mark.parametrize("member", ["shapes", "weights", "bases"])
+def test_members_that_do_not_add_up_are_a_miss_and_are_removed(store, member):
+    """The weights' member holds every row's weights back to back: a file whose shapes, weights
+    or bases disagree with each other or with its number of rows is not read."""
+    kern = _kernels()
+    kernel_store.save("k", kern)
+    [path] = list(store.iterdir())
+    with np.load(path) as z:
+        arrays = {name: z[name] for name in z.files if name != "meta"}
+    arrays[member] = {"shapes": arrays["shapes"] + 1, "weights": arrays["weights"][:-1],
+                      "bases": arrays["bases"][:-1]}[member]
+    path.unlink()
+    record_store.write_entry(store, "k", kernel_store.versions(), {"rows": len(kern)}, lambda: arrays)
+    assert len(list(store.iterdir())) == 1
+    assert kernel_store.load("k") is None and not any(store.iterdir())
+
+
 @pytest.mark.parametrize("value", ["off", "0"])
 def test_turned_off_nothing_is_written_or_read(store, monkeypatch, value):
     kernel_store.save("k", _kernels())

@@ -163,19 +163,27 @@ def test_meanwhile_runs_here_once_the_tasks_are_on_the_cluster_and_never_in_proc
     assert [o.ok for o in out] == [True, True] and sorted(seen) == [0, 1]
 
 
+def _profiles(dask_worker) -> bool:
+    """Whether a worker samples its tasks' stacks for the dashboard (Dask's statistical profiler)."""
+    return "profile" in dask_worker.periodic_callbacks
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("user_value", [None, "1048576"])
 def test_local_workers_start_without_dasks_trim_threshold(monkeypatch, user_value: str | None) -> None:
     """Dask's nannies start a worker with ``MALLOC_TRIM_THRESHOLD_=65536`` (glibc's dynamic mmap
-    threshold off: each large array of a point is page-faulted again); a local cluster of
-    bench_sim's starts its workers without it, and keeps a value the user set."""
+    threshold off: each large array of a point is page-faulted again) and a profiler thread; a
+    local cluster of bench_sim's starts its workers without either, and keeps a value of the
+    variable the user set."""
     if user_value is None:
         monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
     else:
         monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", user_value)
     with open_client(workers=1) as client:
         seen = client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_")
+        profiling = client.run(_profiles)
     assert list(seen.values()) == [user_value]
+    assert list(profiling.values()) == [False]  # nor the dashboard's statistical profiler
     assert os.environ.get("MALLOC_TRIM_THRESHOLD_") == user_value  # nor set in this process
 
 
