@@ -43,10 +43,12 @@ for _sig in _EARLY:
 
 from bench_sim.cli import app  # noqa: E402 - imported with Ctrl-C and SIGTERM handled
 from bench_sim.io.interrupts import Terminated, leave_if_pending, leave_now, own_process_signals  # noqa: E402
+from bench_sim.runtime import collector  # noqa: E402
 from bench_sim.runtime.allocator import one_arena  # noqa: E402
 
 own_process_signals()
 one_arena()  # before the command starts its threads (bench_sim.runtime.allocator)
+collector.own()  # the command line's objects settled (bench_sim.runtime.collector)
 
 
 #: Longest wait for the libraries' exit functions before the process leaves regardless [s]

@@ -6,6 +6,12 @@ checkout's virtual environment, its package first on ``PYTHONPATH``, so both sid
 libraries. Runs are paired and interleaved (A, B, A, B, ...) so that a change of the machine's
 load hits both sides alike; medians and their ratio are printed with the load average.
 
+Both sides run from compiled bytecode (:func:`compiled`: ``compileall`` of the side's package
+before its first run): an exported tree has no ``__pycache__``, and where the environment
+forbids writing it (``PYTHONDONTWRITEBYTECODE``) every process of that side -- the command and
+each Dask worker -- would compile the package's sources again at import (0.25 s of CPU for
+``import bench_sim.cli``), a handicap the other side does not carry.
+
 Usage from a benchmark::
 
     from baseline import add_baseline_args, Side, paired, load_line
@@ -50,6 +56,14 @@ def export_tree(rev: str) -> Path:
         archive = subprocess.run(["git", "-C", str(ROOT), "archive", sha], check=True,
                                  capture_output=True).stdout
         subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+    return compiled(tree)
+
+
+def compiled(tree: Path) -> Path:
+    """``tree`` with its package's bytecode written and up to date (``python -m compileall``: only
+    what is missing or stale is compiled); returns ``tree``."""
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "bench_sim")], check=True,
+                   stdout=subprocess.DEVNULL)
     return tree
 
 
@@ -62,6 +76,7 @@ class Side:
 
     @classmethod
     def current(cls) -> Side:
+        compiled(ROOT)  # the checkout's package (the installed one is this checkout's, editable)
         return cls("this checkout", None)
 
     @classmethod

@@ -23,6 +23,8 @@ import contextlib
 import importlib
 from collections.abc import Iterable
 
+from bench_sim.runtime import collector
+
 __all__ = ["FIGURES", "import_modules"]
 
 #: what bench_sim's figures are drawn with (matplotlib's figure and its Agg canvas, no GUI)
@@ -31,7 +33,11 @@ FIGURES = ("matplotlib.figure", "matplotlib.backends.backend_agg")
 
 def import_modules(modules: Iterable[str]) -> None:
     """Import ``modules`` (dotted names), in order, in this thread; a module that fails to
-    import is left for the command's own import to report (its error is not raised here)."""
-    for name in modules:
-        with contextlib.suppress(Exception):
-            importlib.import_module(name)
+    import is left for the command's own import to report (its error is not raised here).
+    The garbage collector is paused meanwhile, and in ``bench-sim``'s own process what they
+    made is settled after (:mod:`bench_sim.runtime.collector`)."""
+    with collector.paused():
+        for name in modules:
+            with contextlib.suppress(Exception):
+                importlib.import_module(name)
+    collector.settle()

@@ -47,3 +47,23 @@ def test_the_modules_are_imported_in_the_callers_thread(tmp_path, monkeypatch: p
     import_modules(["bench_sim_probe_module"])
     assert sys.modules["bench_sim_probe_module"].THREAD == threading.current_thread().name
     assert threading.active_count() == before
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_the_modules_are_imported_with_the_collector_paused(tmp_path, monkeypatch, enabled: bool) -> None:
+    """The garbage collector is off while they import (bench_sim.runtime.collector) and as it
+    was afterwards; outside a bench-sim process nothing is frozen."""
+    import gc
+
+    (tmp_path / "bench_sim_gc_probe.py").write_text("import gc\nENABLED = gc.isenabled()\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "bench_sim_gc_probe", raising=False)
+    was, frozen = gc.isenabled(), gc.get_freeze_count()
+    (gc.enable if enabled else gc.disable)()
+    try:
+        import_modules(["bench_sim_gc_probe"])
+        assert sys.modules["bench_sim_gc_probe"].ENABLED is False
+        assert gc.isenabled() is enabled
+    finally:
+        (gc.enable if was else gc.disable)()
+    assert gc.get_freeze_count() == frozen
