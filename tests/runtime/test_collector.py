@@ -45,7 +45,8 @@ def test_the_program_settles_the_command_line() -> None:
     code = ("import gc, runpy, sys; sys.argv = ['bench-sim', '--help']\n"
             "try:\n    runpy.run_module('bench_sim', run_name='__main__')\n"
             "except SystemExit:\n    pass\n")
-    probe = "import atexit, gc, os; atexit.register(lambda: os.write(2, b'FROZEN %d\\n' % gc.get_freeze_count()))\n"
+    probe = ("import atexit, gc, os\n"
+             "atexit.register(lambda: os.write(2, b'FROZEN %d\\n' % gc.get_freeze_count()))\n")
     done = subprocess.run([sys.executable, "-c", probe + code], capture_output=True, text=True, timeout=120)
     lines = [ln for ln in done.stderr.splitlines() if ln.startswith("FROZEN")]
     plain = subprocess.run([sys.executable, "-c", "import gc, bench_sim.cli; print(gc.get_freeze_count())"],
