@@ -40,6 +40,7 @@ from typing import Any
 
 from bench_sim.errors import BenchSimError, ClusterError
 from bench_sim.io.interrupts import deferred_interrupts
+from bench_sim.runtime import collector
 
 __all__ = [
     "SCHEMES",
@@ -200,6 +201,7 @@ def _prepare_worker() -> None:
     Nothing is imported here on a thread of its own meanwhile (see :mod:`bench_sim.runtime.preload`
     for why): a worker imports what its tasks need as it runs them."""
     _own_process_group()
+    collector.own()  # its objects so far settled; its first task settles again (collector.settle_once)
     atexit.register(gc.freeze)
 
 

@@ -39,6 +39,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from bench_sim.errors import BenchSimError, ClusterError
+from bench_sim.runtime import collector
 from bench_sim.runtime.cluster import (
     close_in_background,
     probe_scheduler,
@@ -183,6 +184,7 @@ def _run_one(func: Callable[..., Any], index: int, arg: Any, *shared: Any) -> Ta
         where = get_worker().address
     except (ImportError, ValueError):
         where = "local"
+    collector.settle_once()  # a worker of bench_sim's local cluster: its task's modules are in
     t0 = time.perf_counter()
     failed = next((s for s in shared if isinstance(s, _SharedError)), None)
     if failed is not None:

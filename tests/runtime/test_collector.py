@@ -53,3 +53,17 @@ def test_the_program_settles_the_command_line() -> None:
                            capture_output=True, text=True, timeout=120, check=True)
     assert int(plain.stdout) == 0
     assert lines and int(lines[0].split()[1]) > 10_000, done.stderr[-2000:]
+
+
+def test_settle_once_settles_the_first_time_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A worker's first task settles what its imports made; a later task's garbage is never frozen."""
+    monkeypatch.setattr(collector, "_OWN", True)
+    monkeypatch.setattr(collector, "_SETTLED_ONCE", False)
+    try:
+        assert collector.settle_once() is True
+        frozen = gc.get_freeze_count()
+        held = [[] for _ in range(100)]  # tracked objects made after it
+        assert collector.settle_once() is False and gc.get_freeze_count() == frozen
+    finally:
+        gc.unfreeze()
+    assert held

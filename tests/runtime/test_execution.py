@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import itertools
 import os
 
@@ -182,7 +183,9 @@ def test_local_workers_start_without_dasks_trim_threshold(monkeypatch, user_valu
     with open_client(workers=1) as client:
         seen = client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_")
         profiling = client.run(_profiles)
+        frozen = client.run(gc.get_freeze_count)  # bench-sim's own process (runtime.collector)
     assert list(seen.values()) == [user_value]
+    assert all(n > 0 for n in frozen.values())
     assert list(profiling.values()) == [False]  # nor the dashboard's statistical profiler
     assert os.environ.get("MALLOC_TRIM_THRESHOLD_") == user_value  # nor set in this process
 
