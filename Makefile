@@ -60,6 +60,7 @@ install-check:
 bench: setup
 	$(PY) benchmarks/bench_render.py
 	$(PY) benchmarks/bench_sensor.py
+	$(PY) benchmarks/bench_truth_reads.py
 	$(PY) benchmarks/bench_effects.py
 	$(PY) benchmarks/bench_fusion.py
 	$(PY) benchmarks/bench_reproduce.py
