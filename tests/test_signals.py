@@ -170,6 +170,56 @@ def test_a_signal_deferred_as_a_run_ends_is_not_sent_into_what_follows() -> None
     assert res.returncode == 0 and res.stdout.strip() == "clean", (res.returncode, res.stdout, res.stderr)
 
 
+_GC_CALLBACK_CASE = """
+import gc, signal, time
+from bench_sim.io.interrupts import command_signals
+fired = []
+def callback(phase, info):
+    if phase == "stop" and not fired:
+        fired.append(1)
+        signal.raise_signal(signal.SIGINT)  # its handler runs at the next bytecode: in here
+        sum(range(100))
+t0 = time.monotonic()
+try:
+    with command_signals():
+        gc.callbacks.append(callback)
+        gc.collect()
+        while time.monotonic() - t0 < 5.0:
+            time.sleep(0.01)
+    print("lost")
+except KeyboardInterrupt:
+    print("raised after", round(time.monotonic() - t0, 2), "s")
+"""
+
+
+def test_a_signal_raised_inside_a_garbage_collector_callback_is_sent_again() -> None:
+    """Python drops an exception raised in a garbage collector's callback ("Exception ignored");
+    a signal's exception raised there is sent again a moment later and raised where the command
+    can stop (Dask's ``GCDiagnosis`` callback in a sweep's client swallowed a Ctrl-C once in the
+    stress series, and the sweep exited 0)."""
+    res = subprocess.run([sys.executable, "-c", _GC_CALLBACK_CASE], env=_env(), capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0, (res.returncode, res.stdout, res.stderr[-2000:])
+    assert res.stdout.startswith("raised after"), (res.stdout, res.stderr[-2000:])
+    assert float(res.stdout.split()[2]) < 2.0 and "Exception ignored" not in res.stderr, res.stderr
+
+
+_LEAVING_CASE = """
+from bench_sim.io import interrupts
+interrupts._LEAVING.append(2)  # a first leave_now on its way out (its line written)
+interrupts.leave_now(2, " as the command ended")
+print("returned")
+"""
+
+
+def test_leave_now_says_its_line_once() -> None:
+    """A handler that runs inside ``leave_now`` (a signal sent again meanwhile, between its write
+    and its exit) returns instead of writing a second line: the stress series once saw two."""
+    res = subprocess.run([sys.executable, "-c", _LEAVING_CASE], env=_env(), capture_output=True, text=True,
+                         timeout=120)
+    assert (res.returncode, res.stdout.strip(), res.stderr) == (0, "returned", ""), res
+
+
 def test_the_import_machinery_counts_as_importing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A frame seen from inside the import system (a finder on ``sys.meta_path``, called with
     the module locks of ``importlib._bootstrap`` around it) is importing; the test's own frame

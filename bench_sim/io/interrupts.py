@@ -100,9 +100,18 @@ def _one_line(signum: int, when: str) -> bytes:
     return f"bench-sim: {kind}: stopped by {what}{when}\n".encode()
 
 
+#: set by the first :func:`leave_now` of the process: the process is on its way out
+_LEAVING: list[int] = []
+
+
 def leave_now(signum: int, when: str) -> None:
     """One line on stderr, ``bench-sim: interrupted: stopped by Ctrl-C`` + ``when`` (or
-    ``terminated ... SIGTERM``), and the signal's exit status, at once (no unwinding)."""
+    ``terminated ... SIGTERM``), and the signal's exit status, at once (no unwinding). Once:
+    a handler that runs inside it (a signal sent again meanwhile, run between its last two
+    bytecodes) returns, and the first call ends the process (one line, never two)."""
+    if _LEAVING:
+        return
+    _LEAVING.append(signum)
     with contextlib.suppress(Exception):  # the main thread may be inside a write to stdout
         sys.stdout.flush()
     os.write(2, _one_line(signum, when))
@@ -188,6 +197,33 @@ def _ignore_unraisable(unraisable: Any) -> None:
     """``sys.unraisablehook`` once the command has ended: nothing more is said."""
 
 
+def _swallowed_signal(unraisable: Any) -> int | None:
+    """The signal whose exception (raised by a handler of :func:`_import_safe`) ``unraisable`` is,
+    or ``None``: one raised where it cannot propagate, in a finaliser or a garbage collector's
+    callback (Dask's ``GCDiagnosis``), which Python reports as "Exception ignored" and drops."""
+    exc = getattr(unraisable, "exc_value", None)
+    if not _RAISED or not isinstance(exc, KeyboardInterrupt | Terminated):
+        return None
+    return signal.SIGINT if isinstance(exc, KeyboardInterrupt) else signal.SIGTERM
+
+
+def _redeliver_swallowed(previous: Any) -> Any:
+    """A ``sys.unraisablehook`` that sends a signal whose exception was swallowed
+    (:func:`_swallowed_signal`) again a moment later (:data:`REDELIVER_S`), so that it is raised
+    where it can stop the command, and passes anything else to ``previous``."""
+
+    def hook(unraisable: Any) -> None:
+        signum = _swallowed_signal(unraisable)
+        if signum is None:
+            previous(unraisable)
+            return
+        _RAISED.remove(signum)  # not raised after all: raised again when it comes back
+        _redelivery().later(signum)
+
+    hook.bench_sim_hook = True  # type: ignore[attr-defined]
+    return hook
+
+
 def _late(signum: int, frame: FrameType | None) -> None:
     leave_now(signum, " as the command ended")
 
@@ -205,6 +241,8 @@ def own_process_signals() -> None:
     an import, from now on; after a command, a signal ends the process at once."""
     global _OWN_PROCESS
     _install(_import_safe(_redelivery()))
+    if not getattr(sys.unraisablehook, "bench_sim_hook", False):
+        sys.unraisablehook = _redeliver_swallowed(sys.unraisablehook)
     _OWN_PROCESS = True
 
 
@@ -236,11 +274,14 @@ def command_signals() -> Iterator[None]:
     # pending for this one (its patience, counted from then, would end this process at once)
     redelivery.since.clear()
     previous = _install(_import_safe(redelivery))
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _redeliver_swallowed(previous_hook)
     try:
         yield
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+        sys.unraisablehook = previous_hook
         redelivery.since.clear()
 
 
