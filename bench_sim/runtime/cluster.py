@@ -194,7 +194,8 @@ def _own_process_group() -> None:
 
 def _prepare_worker() -> None:
     """Run in each worker process of a local cluster as it starts: its own process group
-    (:func:`_own_process_group`) and a quick exit. At its exit the interpreter's last garbage
+    (:func:`_own_process_group`), ``bench-sim``'s own garbage collector settings
+    (:func:`bench_sim.runtime.collector.own`) and a quick exit. At its exit the interpreter's last garbage
     collection walks every object the run's imports made (Mitsuba, xarray, numba: ~1 s per
     worker, which the cluster's close waits for); ``gc.freeze`` at exit leaves those out. The
     worker's tasks and their files are closed by then, and its memory goes back with the process.

@@ -13,10 +13,10 @@ and 0.1 s in one full collection between two points. So a ``bench-sim`` process
   collections walk only what the command itself makes.
 
 The worker processes of a local cluster (:mod:`bench_sim.runtime.cluster`) are ``bench-sim``'s
-own too: each settles what it holds as it starts and again as its first task starts
-(:func:`settle_once`, from :mod:`bench_sim.runtime.execution`), once the task's modules are
-imported. A worker of a 6-point sweep spent 0.23-0.31 s in collections, most of it walking
-those modules' objects again at every full collection.
+own too: each settles what it holds as it starts and again as its first task starts (a point,
+a sample or a shared input: :func:`settle_once`, from :mod:`bench_sim.runtime.execution`), once
+the task's modules are imported. A worker of a 6-point sweep spent 0.23-0.31 s in collections,
+most of it walking those modules' objects again at every full collection.
 
 Nothing changes in a program that imports bench_sim: :func:`settle` freezes nothing unless
 :func:`own` was called (by :mod:`bench_sim.__main__`), and :func:`paused` restores the

@@ -125,6 +125,7 @@ class _SharedError:
 
 def _make_shared(func: Callable[[Any], Any], arg: Any) -> Any:
     """Make a shared input (in a worker); a failure becomes a :class:`_SharedError`."""
+    collector.settle_once()  # a worker's first task may be this one: settled before it makes garbage
     try:
         return func(arg)
     except Exception as exc:
@@ -184,7 +185,7 @@ def _run_one(func: Callable[..., Any], index: int, arg: Any, *shared: Any) -> Ta
         where = get_worker().address
     except (ImportError, ValueError):
         where = "local"
-    collector.settle_once()  # a worker of bench_sim's local cluster: its task's modules are in
+    collector.settle_once()  # a local cluster's worker: its task's modules are in (once per process)
     t0 = time.perf_counter()
     failed = next((s for s in shared if isinstance(s, _SharedError)), None)
     if failed is not None:
